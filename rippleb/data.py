@@ -1,0 +1,252 @@
+"""The data that flows through rippleb: joint specification, sensor logs and blocks.
+
+A :class:`SensorLog` is what a DAQ records on one joint: equal-length numpy columns
+sampled at ``spec.fs``. Simulated logs also carry ``torque_true`` (what the flexspline
+really carries) and ``torque_ref`` (the paper's model torque). Methods see
+:class:`SensorBlock` objects, one control tick at a time, and never the truth.
+
+Examples
+--------
+>>> import numpy as np
+>>> from rippleb import JointSpec, SensorLog
+>>> spec = JointSpec()
+>>> log = SensorLog(spec=spec, t=np.arange(40) / spec.fs, strain=np.zeros(40),
+...                 encoder=np.zeros(40, dtype=np.int64), current=np.zeros(40))
+>>> [len(b) for b in log.blocks()]
+[20, 20]
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from rippleb.errors import InputError
+
+SENSOR_COLUMNS = ("t", "strain", "encoder", "current")
+TRUTH_COLUMNS = ("torque_true", "torque_ref")
+LOG_COLUMNS = SENSOR_COLUMNS + TRUTH_COLUMNS
+
+
+@dataclass(frozen=True)
+class JointSpec:
+    """What an engineer knows about a joint from datasheets and the DAQ.
+
+    Never the simulator's hidden truth (ripple, friction, gauge errors).
+
+    Parameters
+    ----------
+    fs
+        DAQ sample rate of strain and current [Hz]. Default 20 kHz (DESIGN.md).
+    control_rate
+        Control tick rate [Hz]; the runner hands ``fs / control_rate`` samples per
+        ``step``. Default 1 kHz (DESIGN.md).
+    gear_ratio
+        Harmonic-drive reduction N. Default 100 (SHD-25-100, the paper's Sec. IV-A).
+    counts_per_rev
+        Encoder positions per motor revolution. Default 2500 (the paper's Sec. IV-A).
+    rated_torque
+        Rated output torque [Nm]. Default 51 Nm: Harmonic Drive SHD-25-100 catalogue
+        rating at 2000 rpm input (size-25 ratings span 51-87 Nm over ratios 50-160).
+    torque_constant
+        Motor torque constant K_t [Nm/A]. Default 0.07: estimate for a 200 W class
+        brushless servo motor of the size that drives a size-25 harmonic drive
+        (catalogue values of such motors lie in 0.05-0.1 Nm/A).
+    rotor_inertia
+        Inertia on the motor shaft, rotor plus wave generator [kg m^2]. Default
+        6e-5: estimate, rotor about 1.8e-5 plus size-25 wave generator 4.1e-5
+        (Harmonic Drive CSG/SHG-25 catalogue input inertia).
+    """
+
+    fs: float = 20_000.0
+    control_rate: float = 1_000.0
+    gear_ratio: float = 100.0
+    counts_per_rev: int = 2500
+    rated_torque: float = 51.0
+    torque_constant: float = 0.07
+    rotor_inertia: float = 6.0e-5
+
+    @property
+    def block_size(self) -> int:
+        """Samples per control tick, ``fs / control_rate``."""
+        return max(1, int(round(self.fs / self.control_rate)))
+
+    def validate(self, where: str = "joint spec") -> "JointSpec":
+        """Refuse impossible values with one sentence naming the field."""
+        positive = ("fs", "control_rate", "gear_ratio", "counts_per_rev", "rated_torque",
+                    "torque_constant", "rotor_inertia")
+        for name in positive:
+            value = getattr(self, name)
+            if not np.isfinite(value) or value <= 0:
+                raise InputError(f"{where}: {name} must be a positive number, got {value!r}")
+        if self.control_rate > self.fs:
+            raise InputError(f"{where}: control_rate ({self.control_rate}) exceeds fs ({self.fs})")
+        return self
+
+
+@dataclass(frozen=True)
+class SensorBlock:
+    """The samples of one control tick: equal-length arrays, oldest first.
+
+    ``t`` [s], ``strain`` [V], ``encoder`` [integer counts], ``current`` [A].
+    """
+
+    t: np.ndarray
+    strain: np.ndarray
+    encoder: np.ndarray
+    current: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+@dataclass(frozen=True, eq=False)
+class SensorLog:
+    """A recording of one joint, equal-length columns sampled at ``spec.fs``.
+
+    ``torque_true`` is present only on simulated logs and never reaches a method;
+    ``torque_ref`` reaches a method only in the calibration log.
+    ``meta`` holds provenance (scenario, seed, run) and is free-form.
+    """
+
+    spec: JointSpec
+    t: np.ndarray
+    strain: np.ndarray
+    encoder: np.ndarray
+    current: np.ndarray
+    torque_true: np.ndarray | None = None
+    torque_ref: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def blocks(self, size: int | None = None) -> Iterator[SensorBlock]:
+        """Yield the log as consecutive blocks of ``size`` samples (default one tick).
+
+        The last block may be shorter. Blocks are views, not copies.
+        """
+        size = size or self.spec.block_size
+        for start in range(0, len(self.t), size):
+            stop = start + size
+            yield SensorBlock(self.t[start:stop], self.strain[start:stop],
+                              self.encoder[start:stop], self.current[start:stop])
+
+    def block(self, start: int, stop: int) -> SensorBlock:
+        """The samples ``start:stop`` as one block."""
+        return SensorBlock(self.t[start:stop], self.strain[start:stop],
+                           self.encoder[start:stop], self.current[start:stop])
+
+    def for_method(self, *, keep_ref: bool) -> "SensorLog":
+        """A copy a method may see: no ``torque_true``; ``torque_ref`` only if ``keep_ref``."""
+        return dataclasses.replace(self, torque_true=None,
+                                   torque_ref=self.torque_ref if keep_ref else None)
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """The columns that are present, in file order."""
+        cols = {name: getattr(self, name) for name in LOG_COLUMNS}
+        return {name: value for name, value in cols.items() if value is not None}
+
+
+def make_log(spec: JointSpec, columns: dict, *, source: str = "log", meta: dict | None = None) -> SensorLog:
+    """Build a :class:`SensorLog` from columns after checking the schema.
+
+    Raises :class:`~rippleb.errors.InputError` naming ``source`` and the column for a
+    missing column, an empty log, NaN or infinite values, non-integer encoder counts,
+    or time stamps that do not strictly increase.
+    """
+    missing = [name for name in SENSOR_COLUMNS if name not in columns]
+    if missing:
+        raise InputError(f"{source}: missing column(s) {', '.join(missing)} "
+                         f"(a log needs {', '.join(SENSOR_COLUMNS)})")
+    arrays = {}
+    for name in LOG_COLUMNS:
+        if name not in columns or columns[name] is None:
+            continue
+        try:
+            arrays[name] = np.asarray(columns[name], dtype=float)
+        except (TypeError, ValueError):
+            raise InputError(f"{source}: column {name} is not numeric") from None
+    n = len(arrays["t"])
+    if n == 0:
+        raise InputError(f"{source}: the log is empty")
+    for name, values in arrays.items():
+        if values.ndim != 1 or len(values) != n:
+            raise InputError(f"{source}: column {name} has {values.size} values, t has {n}")
+        bad = ~np.isfinite(values)
+        if bad.any():
+            raise InputError(f"{source}: column {name} holds NaN or infinite values "
+                             f"(first at row {int(np.argmax(bad))})")
+    steps = np.diff(arrays["t"])
+    if (steps <= 0).any():
+        row = int(np.argmax(steps <= 0)) + 1
+        raise InputError(f"{source}: column t must strictly increase (row {row} repeats or goes back)")
+    if len(steps) and steps.max() > 1.5 * np.median(steps):
+        row = int(np.argmax(steps > 1.5 * np.median(steps))) + 1
+        raise InputError(f"{source}: column t has a gap of {steps[row - 1]:.6g} s at row {row} "
+                         f"(sample period {np.median(steps):.6g} s); rippleb needs an unbroken log")
+    encoder = arrays["encoder"]
+    if not np.array_equal(encoder, np.round(encoder)):
+        raise InputError(f"{source}: column encoder must hold integer counts")
+    arrays["encoder"] = encoder.astype(np.int64)
+    return SensorLog(spec=spec, meta=dict(meta or {}), **arrays)
+
+
+def read_log(path: str | Path, spec: JointSpec | None = None) -> SensorLog:
+    """Read a log from CSV or Parquet and check its schema.
+
+    Parameters
+    ----------
+    path
+        A ``.csv`` or ``.parquet`` file with at least the columns ``t, strain,
+        encoder, current``; ``torque_ref`` and ``torque_true`` are optional.
+    spec
+        The joint the log was recorded on. By default :class:`JointSpec` with ``fs``
+        taken from the median time step.
+    """
+    import pandas as pd
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".csv", ".parquet"):
+        raise InputError(f"{path}: unsupported log format {suffix or '(none)'!r}; use .csv or .parquet")
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+    try:
+        frame = pd.read_csv(path) if suffix == ".csv" else pd.read_parquet(path)
+    except Exception as exc:  # pandas raises many types for unreadable files
+        raise InputError(f"{path}: cannot read as {suffix[1:]}: {str(exc).splitlines()[0]}") from None
+    columns = {name: frame[name].to_numpy() for name in frame.columns if name in LOG_COLUMNS}
+    if spec is None:
+        spec = JointSpec()
+        if len(frame) > 1 and "t" in columns:
+            dt = float(np.median(np.diff(np.asarray(columns["t"], dtype=float))))
+            if np.isfinite(dt) and dt > 0:
+                spec = dataclasses.replace(spec, fs=round(1.0 / dt, 6))
+    return make_log(spec, columns, source=str(path), meta={"source": str(path)})
+
+
+def write_log(log: SensorLog, path: str | Path) -> Path:
+    """Write ``log`` to CSV or Parquet (by suffix), atomically."""
+    import pandas as pd
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".csv", ".parquet"):
+        raise InputError(f"{path}: unsupported log format {suffix or '(none)'!r}; use .csv or .parquet")
+    frame = pd.DataFrame(log.columns())
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        if suffix == ".csv":
+            frame.to_csv(tmp, index=False, float_format="%.9g")
+        else:
+            frame.to_parquet(tmp, index=False)
+        tmp.replace(path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None
+    return path

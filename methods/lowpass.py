@@ -1,0 +1,57 @@
+"""``lowpass``: the ``raw`` estimate through a fixed Butterworth low-pass filter.
+
+It shows the trade-off a plain filter makes: the ripple frequency follows the motor
+speed (order 4 at 4x the wave-generator rotation rate), so a cutoff low enough to remove
+it at low speed delays every torque change.
+
+Cutoff
+------
+20 Hz, second order. Chosen on the ``calibration`` scenario only (never on a scored
+scenario): ``docs/metrics.md`` ("Choosing the lowpass cutoff") gives the sweep, run with
+``python benchmarks/lowpass_cutoff.py``. Below about 10 Hz the delay dominates the error, above
+about 50 Hz the ripple passes.
+"""
+
+from __future__ import annotations
+
+from scipy.signal import butter, lfilter, lfilter_zi
+
+from rippleb.dsp import fit_gain_offset
+from rippleb.method import Method
+
+
+class Lowpass(Method):
+    """Butterworth low-pass of order ``order`` at ``cutoff_hz`` on the calibrated strain.
+
+    Parameters
+    ----------
+    cutoff_hz
+        -3 dB frequency [Hz].
+    order
+        Filter order; 2 keeps the transfer-function form numerically sound at
+        ``cutoff_hz / fs`` of 1e-3 (higher orders would need second-order sections,
+        whose ``sosfilt`` call costs about 6x more per tick).
+    """
+
+    name = "lowpass"
+
+    def __init__(self, cutoff_hz: float = 20.0, order: int = 2):
+        self.cutoff_hz = cutoff_hz
+        self.order = order
+
+    def fit(self, calibration):
+        self.gain_, self.offset_ = fit_gain_offset(calibration.strain, calibration.torque_ref)
+
+    def reset(self, spec):
+        super().reset(spec)
+        self.b_, self.a_ = butter(self.order, self.cutoff_hz, fs=spec.fs)
+        self.zi_ = None
+
+    def step(self, block):
+        # Filter the torque (not the strain) so the unit-DC-gain filter keeps the offset.
+        x = block.strain * self.gain_ + self.offset_
+        if self.zi_ is None:
+            # Start in steady state on the first sample, not from zero torque.
+            self.zi_ = lfilter_zi(self.b_, self.a_) * x[0]
+        y, self.zi_ = lfilter(self.b_, self.a_, x, zi=self.zi_)
+        return y

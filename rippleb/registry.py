@@ -1,0 +1,183 @@
+"""Discovery of methods: built-ins from ``rippleb.methods`` and third-party entry points.
+
+Built-in methods are the :class:`~rippleb.method.Method` subclasses with a ``name``
+defined in the modules of the package ``rippleb.methods`` (the top-level ``methods/``
+directory of the repository). A module may define several methods. Third-party methods
+register in the entry-point group ``rippleb.methods``; the entry point's name is the
+method's name, and its module is imported only when the method is used (or listed).
+
+A module or entry point that fails to import becomes a *broken* entry with its error as
+one line; the others keep working. Two methods with one name raise
+:class:`~rippleb.errors.PluginError`, naming both sources.
+
+Examples
+--------
+>>> from rippleb.registry import Registry
+>>> reg = Registry.discover()
+>>> "raw" in reg.names()
+True
+"""
+
+from __future__ import annotations
+
+import difflib
+import importlib
+import importlib.metadata
+import inspect
+import pkgutil
+from dataclasses import dataclass, field
+
+from rippleb.errors import InputError, PluginError
+from rippleb.method import Method
+
+GROUP = "rippleb.methods"
+BUILTIN_PACKAGE = "rippleb.methods"
+
+
+def one_line(exc: BaseException) -> str:
+    """``Type: first line of the message``, the way broken plugins are shown."""
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
+
+
+@dataclass
+class Entry:
+    """One method the registry knows about.
+
+    ``origin`` is ``builtin`` or ``plugin``; ``source`` the module (built-in) or
+    ``distribution: module:attr`` (plugin); ``error`` the import error of a broken entry.
+    """
+
+    name: str
+    origin: str
+    source: str
+    cls: type | None = None
+    error: str | None = None
+    _entry_point: object = field(default=None, repr=False)
+
+    @property
+    def broken(self) -> bool:
+        """True once loading has failed."""
+        return self.error is not None
+
+    def load(self) -> type:
+        """The method class, importing a plugin on first use.
+
+        Raises
+        ------
+        PluginError
+            If the plugin fails to import or is not a ``Method`` subclass.
+        """
+        if self.cls is None and self.error is None:
+            try:
+                obj = self._entry_point.load()
+            except BaseException as exc:  # a plugin may raise anything at import, even SystemExit
+                if isinstance(exc, KeyboardInterrupt):
+                    raise
+                self.error = one_line(exc)
+            else:
+                if not (inspect.isclass(obj) and issubclass(obj, Method)):
+                    self.error = f"TypeError: {self.source} is not a rippleb.Method subclass"
+                else:
+                    self.cls = obj
+        if self.error is not None:
+            raise PluginError(f"method {self.name!r} ({self.source}) is broken: {self.error}")
+        return self.cls
+
+
+class Registry:
+    """Every method by name; build with :meth:`discover`.
+
+    Parameters
+    ----------
+    entries
+        Method entries by name.
+    broken_modules
+        Built-in modules that failed to import, as ``{module: error}``; their
+        method names are unknown, so they cannot be run.
+    """
+
+    def __init__(self, entries: dict[str, Entry], broken_modules: dict[str, str]):
+        self.entries = entries
+        self.broken_modules = broken_modules
+
+    @classmethod
+    def discover(cls, group: str = GROUP) -> "Registry":
+        """Import the built-in modules and list (without importing) the entry points."""
+        entries, broken = _builtin_entries()
+        for entry in _plugin_entries(group):
+            if entry.name in entries:
+                other = entries[entry.name]
+                raise PluginError(f"two methods are named {entry.name!r}: "
+                                  f"{other.source} ({other.origin}) and {entry.source} ({entry.origin})")
+            entries[entry.name] = entry
+        return cls(entries, broken)
+
+    def names(self, origin: str | None = None) -> list[str]:
+        """Method names, sorted; only those of ``origin`` (builtin/plugin) if given."""
+        return sorted(n for n, e in self.entries.items() if origin is None or e.origin == origin)
+
+    def get(self, name: str) -> Entry:
+        """The entry named ``name``; unknown names raise :class:`InputError` with a suggestion."""
+        try:
+            return self.entries[name]
+        except KeyError:
+            raise InputError(unknown_name("method", name, self.names())) from None
+
+    def load_all(self) -> None:
+        """Import every plugin so that broken ones show their error (for ``rippleb list``)."""
+        for entry in self.entries.values():
+            try:
+                entry.load()
+            except PluginError:
+                pass
+
+
+def unknown_name(kind: str, name: str, known: list[str]) -> str:
+    """``unknown method 'rwa' (did you mean 'raw'?)`` as one sentence."""
+    close = difflib.get_close_matches(name, known, n=1, cutoff=0.5)
+    hint = f"did you mean {close[0]!r}?" if close else f"known: {', '.join(known) or 'none'}"
+    return f"unknown {kind} {name!r} ({hint})"
+
+
+def _builtin_entries() -> tuple[dict[str, Entry], dict[str, str]]:
+    package = importlib.import_module(BUILTIN_PACKAGE)
+    entries: dict[str, Entry] = {}
+    broken: dict[str, str] = {}
+    for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda i: i.name):
+        if info.name.startswith("_"):
+            continue
+        module_name = f"{BUILTIN_PACKAGE}.{info.name}"
+        try:
+            module = importlib.import_module(module_name)
+        except BaseException as exc:  # keep the other built-ins usable whatever one raises
+            if isinstance(exc, KeyboardInterrupt):
+                raise
+            broken[module_name] = one_line(exc)
+            continue
+        for cls in _methods_defined_in(module):
+            if cls.name in entries:
+                raise PluginError(f"two methods are named {cls.name!r}: "
+                                  f"{entries[cls.name].source} and {module_name}")
+            entries[cls.name] = Entry(cls.name, "builtin", module_name, cls=cls)
+    return entries, broken
+
+
+def _methods_defined_in(module) -> list[type]:
+    # Only classes defined here: a module that imports another family's class must not
+    # register it twice.
+    return [obj for _, obj in inspect.getmembers(module, inspect.isclass)
+            if issubclass(obj, Method) and obj is not Method and obj.name
+            and obj.__module__ == module.__name__]
+
+
+def _plugin_entries(group: str) -> list[Entry]:
+    found: dict[str, Entry] = {}
+    for ep in importlib.metadata.entry_points(group=group):
+        dist = getattr(ep.dist, "name", None) or "?"
+        source = f"{dist}: {ep.value}"
+        if ep.name in found and found[ep.name].source != source:
+            raise PluginError(f"two methods are named {ep.name!r}: "
+                              f"{found[ep.name].source} (plugin) and {source} (plugin)")
+        found[ep.name] = Entry(ep.name, "plugin", source, _entry_point=ep)
+    return list(found.values())

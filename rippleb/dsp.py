@@ -24,3 +24,81 @@ def fit_gain_offset(strain: np.ndarray, torque: np.ndarray) -> tuple[float, floa
 def encoder_angle(counts: np.ndarray, counts_per_rev: int) -> np.ndarray:
     """Motor (wave-generator) angle [rad] from encoder counts."""
     return np.asarray(counts, dtype=float) * (2.0 * np.pi / counts_per_rev)
+
+
+def lift(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, m: int):
+    """Lifted ("block") matrices of a discrete linear system over ``m`` samples.
+
+    For ``x[k+1] = A x[k] + B u[k]`` and ``y[k] = C x[k] + D u[k]`` with a scalar
+    input, a block of ``m`` inputs ``u`` gives ``y = O @ x0 + T @ u`` and
+    ``x_m = Am @ x0 + R @ u``: a whole control tick of a filter in two matrix
+    products instead of a per-sample loop (the per-tick cost is then set by Python
+    call overhead, not by the filter order).
+
+    Parameters
+    ----------
+    A, B, C, D
+        State matrix (n, n), input vector (n,), output matrix (p, n) or (n,), and
+        feedthrough (p,) or scalar.
+    m
+        Samples per block.
+
+    Returns
+    -------
+    O, T, Am, R
+        ``O`` (p*m, n) and ``T`` (p*m, m) with the rows of output ``i`` at
+        ``i*m:(i+1)*m``; ``Am`` (n, n); ``R`` (n, m).
+    """
+    A = np.atleast_2d(np.asarray(A, dtype=float))
+    B = np.asarray(B, dtype=float).reshape(-1)
+    C = np.atleast_2d(np.asarray(C, dtype=float))
+    D = np.asarray(D, dtype=float).reshape(-1)
+    n, p = A.shape[0], C.shape[0]
+    powers = [np.eye(n)]
+    for _ in range(m):
+        powers.append(A @ powers[-1])
+    markov = np.array([C @ powers[k] @ B for k in range(m)])      # (m, p): C A^k B
+    O = np.empty((p, m, n))
+    T = np.zeros((p, m, m))
+    for k in range(m):
+        O[:, k, :] = C @ powers[k]
+        T[:, k, k] = D
+        for j in range(k):
+            T[:, k, j] = markov[k - 1 - j]
+    R = np.column_stack([powers[m - 1 - j] @ B for j in range(m)]) if m else np.zeros((n, 0))
+    return O.reshape(p * m, n), T.reshape(p * m, m), powers[m], R
+
+
+def steady_state(A: np.ndarray, B: np.ndarray, u0: float) -> np.ndarray:
+    """State of ``x[k+1] = A x + B u`` held at the constant input ``u0`` for ever.
+
+    Starting a filter there instead of at zero avoids the cold-start transient of a
+    step from zero to the first sample (the analogue of ``scipy.signal.lfilter_zi``).
+    """
+    A = np.atleast_2d(np.asarray(A, dtype=float))
+    return np.linalg.solve(np.eye(A.shape[0]) - A, np.asarray(B, dtype=float).reshape(-1) * u0)
+
+
+def biquad_ss(b: np.ndarray, a: np.ndarray):
+    """State space (A, B, C, D) of one biquad in transposed direct form II.
+
+    The transposed direct form keeps low-frequency notches (poles close to 1 at a
+    20 kHz sample rate) well conditioned, unlike a high-order transfer function.
+    """
+    b = np.asarray(b, dtype=float) / a[0]
+    a = np.asarray(a, dtype=float) / a[0]
+    A = np.array([[-a[1], 1.0], [-a[2], 0.0]])
+    B = np.array([b[1] - a[1] * b[0], b[2] - a[2] * b[0]])
+    return A, B, np.array([[1.0, 0.0]]), np.array([b[0]])
+
+
+def series_ss(*systems):
+    """State space of single-input single-output systems in series (first one first)."""
+    A, B, C, D = systems[0]
+    for A2, B2, C2, D2 in systems[1:]:
+        n1, n2 = A.shape[0], A2.shape[0]
+        A = np.block([[A, np.zeros((n1, n2))], [np.outer(B2, C[0]), A2]])
+        B = np.concatenate([B, B2 * D[0]])
+        C = np.concatenate([D2[0] * C[0], C2[0]])[None, :]
+        D = D2 * D[0]
+    return A, B, C, D

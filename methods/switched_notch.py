@@ -1,0 +1,203 @@
+"""``switched-notch``: a bank of time-domain notch filters switched by encoder speed.
+
+After Godler et al., whose ripple compensation uses "a set of multiple notch filters that
+have partially separated cutoff frequencies" (reference [17] of the paper). The ripple of
+order ``k`` sits at ``k`` times the wave-generator rotation frequency ``f``, so it moves
+with speed. The bank holds ``n_bands`` bands whose centre speeds ``c_j`` are spaced
+geometrically from ``min_speed`` to ``max_speed`` [wave-generator rev/s]; band ``j``
+is one filter, the series of second-order notches at ``k * c_j`` for every ``k`` in
+``orders``, each of quality factor ``q``. Because all orders scale with the same speed
+and the notches have constant Q, the relative mistuning ``f / c_j`` is the same for every
+order, so one band index picks the active notch of every order at once.
+
+The encoder speed, measured once per control tick over ``speed_window`` ticks, picks the
+band nearest in log-speed; a band is left only when the speed is ``hysteresis`` of a band
+spacing beyond the half-way point to its neighbour, so a speed sitting on a band edge
+does not chatter. Below the lowest band (half a spacing under ``min_speed``) the strain
+passes through unfiltered: there the ripple lies inside the torque band, and a notch
+would remove torque as much as ripple. Above the highest band the highest band stays on.
+
+Every band runs all the time (kept warm), so a switch never starts a cold filter: the
+whole bank is one block-diagonal linear system advanced once per tick with precomputed
+lifted matrices (``x_L = A^L x_0 + R u``, one batched matrix product), and the active
+band's output is one more product (``y = O x_0 + T u``). Gain and offset come from a
+least-squares fit of the calibration strain to the known torque.
+
+Examples
+--------
+>>> m = SwitchedNotch()
+>>> m.n_bands, m.q
+(40, 2.0)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import signal
+
+from rippleb.data import JointSpec, SensorBlock, SensorLog
+from rippleb.dsp import biquad_ss, fit_gain_offset, lift, series_ss, steady_state
+from rippleb.method import Method
+
+OFF = -1  # band index of the pass-through state below the lowest band
+
+
+def band_centres(min_speed: float, max_speed: float, n_bands: int) -> np.ndarray:
+    """Geometrically spaced centre speeds [rev/s] of the bank, lowest first."""
+    return np.geomspace(min_speed, max_speed, n_bands)
+
+
+def band_filter(centre: float, orders, q: float, fs: float):
+    """State space (A, B, C, D) of one band: notches at ``k * centre`` in series.
+
+    Orders whose notch would reach Nyquist are left out (the ripple there is aliased
+    by the DAQ anyway).
+    """
+    stages = [biquad_ss(*signal.iirnotch(k * centre, q, fs=fs))
+              for k in orders if k * centre < 0.45 * fs]
+    if not stages:
+        return np.zeros((0, 0)), np.zeros(0), np.zeros((1, 0)), np.ones(1)
+    return series_ss(*stages)
+
+
+def select_band(speed: float, current: int, centres: np.ndarray, hysteresis: float) -> int:
+    """The band for ``speed`` [rev/s] given the ``current`` one, with hysteresis.
+
+    In the coordinate ``p = log(speed / c_0) / log(spacing)`` band ``j`` owns
+    ``|p - j| <= 0.5``; the current band is kept while ``|p - j| <= 0.5 + hysteresis``.
+    ``OFF`` (pass-through) sits at ``p = -1``.
+    """
+    if len(centres) > 1:
+        spacing = np.log(centres[1] / centres[0])
+    else:
+        spacing = np.log(2.0)
+    p = np.log(max(speed, 1e-12) / centres[0]) / spacing
+    if abs(p - current) <= 0.5 + hysteresis:
+        return current
+    if current == len(centres) - 1 and p > current:
+        return current
+    return int(np.clip(np.round(p), OFF, len(centres) - 1))
+
+
+class SwitchedNotch(Method):
+    """Switched bank of time-domain notch filters (Godler et al.).
+
+    Parameters
+    ----------
+    orders
+        Ripple orders notched, in cycles per wave-generator revolution. The paper's
+        dominant orders 2, 4 and 8.
+    n_bands
+        Number of bands in the bank.
+    min_speed, max_speed
+        Centre speeds of the lowest and highest band [wave-generator rev/s].
+    q
+        Quality factor of every notch (centre frequency over -3 dB width).
+    hysteresis
+        Extra band coordinate, as a fraction of the band spacing, the speed must pass
+        beyond a band edge before the band switches.
+    speed_window
+        Control ticks over which the encoder speed is measured (a count difference).
+
+    Where the defaults come from is in ``docs/methods/switched-notch.md``.
+    """
+
+    name = "switched-notch"
+
+    def __init__(self, orders=(2, 4, 8), n_bands=40, min_speed=0.5, max_speed=60.0, q=2.0,
+                 hysteresis=0.2, speed_window=10):
+        self.orders = orders
+        self.n_bands = n_bands
+        self.min_speed = min_speed
+        self.max_speed = max_speed
+        self.q = q
+        self.hysteresis = hysteresis
+        self.speed_window = speed_window
+
+    # -- identification --------------------------------------------------------------
+    def fit(self, calibration: SensorLog) -> None:
+        """Least-squares gain and offset of the strain against the known torque."""
+        self.gain_, self.offset_ = fit_gain_offset(calibration.strain, calibration.torque_ref)
+
+    # -- streaming -------------------------------------------------------------------
+    def reset(self, spec: JointSpec) -> None:
+        """Design the bank for ``spec.fs`` and clear the streaming state."""
+        super().reset(spec)
+        if not hasattr(self, "gain_"):
+            self.gain_, self.offset_ = 1.0, 0.0
+        self.centres_ = band_centres(self.min_speed, self.max_speed, self.n_bands)
+        bands = [band_filter(c, self.orders, self.q, spec.fs) for c in self.centres_]
+        self.n_states_ = max(b[0].shape[0] for b in bands)
+        self.bands_ = [_pad(b, self.n_states_) for b in bands]
+        self.tick_ = spec.block_size
+        self.lifted_ = {}
+        self.x_ = None                # bank state (n_bands, n_states), set by the first sample
+        self.band_ = OFF
+        self.phase_ = 0               # samples since the last tick boundary
+        self.marks_ = []              # encoder counts at the last tick boundaries
+
+    def step(self, block: SensorBlock) -> np.ndarray:
+        """Notch the strain with the active band, segment by segment of the tick grid."""
+        u = np.asarray(block.strain, dtype=float)
+        if self.x_ is None and len(u):
+            self._start(u[0], int(block.encoder[0]))
+        if len(u) == self.tick_ and self.phase_ == 0:     # the runner's case: one segment
+            y = self._segment(u)
+            self._tick_boundary(int(block.encoder[-1]))
+        else:
+            y = np.empty_like(u)
+            pos = 0
+            while pos < len(u):
+                m = min(self.tick_ - self.phase_, len(u) - pos)
+                y[pos:pos + m] = self._segment(u[pos:pos + m])
+                pos += m
+                self.phase_ = (self.phase_ + m) % self.tick_
+                if self.phase_ == 0:
+                    self._tick_boundary(int(block.encoder[pos - 1]))
+        return self.gain_ * y + self.offset_
+
+    def _start(self, u0: float, count0: int) -> None:
+        """Every band at rest on the first sample, so no filter starts from zero."""
+        self.x_ = np.array([steady_state(A, B, u0) for A, B, _, _ in self.bands_])
+        self.marks_ = [count0]
+
+    def _segment(self, u: np.ndarray) -> np.ndarray:
+        """Output of the active band over ``u`` and the whole bank's state update."""
+        Am, R, OT = self._lifted(len(u))
+        x = self.x_
+        y = u.copy() if self.band_ == OFF else OT[self.band_] @ np.concatenate([x[self.band_], u])
+        self.x_ = np.einsum("bij,bj->bi", Am, x) + R @ u
+        return y
+
+    def _tick_boundary(self, count: int) -> None:
+        """Measure the speed over the last ticks and pick the band."""
+        marks = self.marks_
+        marks.append(count)
+        if len(marks) > self.speed_window + 1:
+            del marks[0]
+        span = (len(marks) - 1) * self.tick_ / self.spec_.fs
+        speed = abs(marks[-1] - marks[0]) / self.spec_.counts_per_rev / span
+        self.band_ = select_band(speed, self.band_, self.centres_, self.hysteresis)
+
+    def _lifted(self, m: int):
+        """Lifted matrices of every band for a segment of ``m`` samples, cached."""
+        if m not in self.lifted_:
+            parts = [lift(*band, m) for band in self.bands_]
+            Am = np.array([p[2] for p in parts])
+            R = np.array([p[3] for p in parts])
+            OT = np.array([np.hstack([p[0], p[1]]) for p in parts])
+            self.lifted_[m] = (Am, R, OT)
+        return self.lifted_[m]
+
+
+def _pad(system, n: int):
+    """Embed a band's state space in ``n`` states (bands may drop orders near Nyquist)."""
+    A, B, C, D = system
+    k = A.shape[0]
+    Ap = np.zeros((n, n))
+    Ap[:k, :k] = A
+    Bp = np.zeros(n)
+    Bp[:k] = B
+    Cp = np.zeros((1, n))
+    Cp[:, :k] = C
+    return Ap, Bp, Cp, D

@@ -6,6 +6,8 @@ The public API is re-exported here; see the README for the CLI.
 from rippleb.data import JointSpec, SensorBlock, SensorLog, make_log, read_log, write_log
 from rippleb.errors import InputError, PluginError, RipplebError
 from rippleb.method import Method
+from rippleb.scenario import Scenario, builtin_scenarios, load_scenario, scored_scenarios
+from rippleb.simulator import Simulation, simulate
 
 __version__ = "0.1.0"
 
@@ -16,9 +18,15 @@ __all__ = [
     "PluginError",
     "RipplebError",
     "SensorBlock",
+    "Scenario",
     "SensorLog",
+    "Simulation",
     "__version__",
+    "builtin_scenarios",
+    "load_scenario",
     "make_log",
     "read_log",
+    "scored_scenarios",
+    "simulate",
     "write_log",
 ]

@@ -1,0 +1,436 @@
+"""Scenarios: one TOML file each, read as data, checked key by key.
+
+A scenario says which arm joint moves how (a piecewise trajectory of rest-to-rest
+quintic moves, holds, speed ramps and constant-speed cruises), which external torques
+act on it, at which temperature, and which time window is scored. The file name is the
+scenario's name. ``docs/scenarios.md`` describes the format and every built-in.
+
+Examples
+--------
+>>> from rippleb.scenario import load_scenario
+>>> sc = load_scenario("paper-quintic")
+>>> sc.name, sc.scored, round(sc.duration, 2)
+('paper-quintic', True, 4.0)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import importlib.resources
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from rippleb.data import JointSpec
+from rippleb.errors import InputError
+
+CALIBRATION = "calibration"
+SEGMENT_KINDS = ("hold", "move", "ramp", "cruise")
+
+# Allowed keys and their types, per table; the first type is the one named in errors.
+_NUMBER = (float, int)
+_TOP_KEYS = {"description": (str,), "scored": (bool,), "duration": _NUMBER,
+             "temperature_c": _NUMBER, "evaluation": (dict,), "joint": (dict,),
+             "robot": (dict,), "trajectory": (dict,), "load": (list,)}
+_EVAL_KEYS = {"start": _NUMBER, "stop": _NUMBER}
+_JOINT_KEYS = {f.name: ((int,) if f.type in ("int", int) else _NUMBER)
+               for f in dataclasses.fields(JointSpec)}
+_ROBOT_KEYS = {"name": (str,), "joint": (str,), "posture": (dict,)}
+_TRAJ_KEYS = {"start": _NUMBER, "segment": (list,)}
+_SEGMENT_KEYS = {"kind": (str,), "duration": _NUMBER, "to": _NUMBER, "by": _NUMBER,
+                 "velocity": _NUMBER, "shape": (str,)}
+_LOAD_KEYS = {"torque": _NUMBER, "start": _NUMBER, "stop": _NUMBER, "rise": _NUMBER,
+              "known": (bool,)}
+
+#: Defaults: the paper's joint (UR5 shoulder lift stands in for its arm) at a warm
+#: operating temperature. See docs/physics.md for the sources.
+DEFAULT_ROBOT = "ur5"
+DEFAULT_JOINT = "shoulder_lift_joint"
+DEFAULT_TEMPERATURE_C = 40.0
+DEFAULT_RISE = 0.01
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One piece of the joint trajectory, fully resolved.
+
+    ``kind`` is ``hold``, ``move`` (quintic rest-to-rest over ``distance``), ``ramp``
+    (velocity from ``v0`` to ``v1``, ``smooth`` quintic or ``linear`` shape) or
+    ``cruise`` (constant velocity ``v0``). ``t0`` [s], ``q0`` [rad] and ``v0`` [rad/s]
+    are the state at the segment's start.
+    """
+
+    kind: str
+    t0: float
+    duration: float
+    q0: float
+    v0: float
+    v1: float = 0.0
+    distance: float = 0.0
+    shape: str = "smooth"
+
+    @property
+    def t1(self) -> float:
+        """End time [s]."""
+        return self.t0 + self.duration
+
+    @property
+    def q1(self) -> float:
+        """End position [rad]."""
+        if self.kind == "move":
+            return self.q0 + self.distance
+        if self.kind == "ramp":
+            # Both shapes cover the mean of start and end velocity.
+            return self.q0 + 0.5 * (self.v0 + self.v1) * self.duration
+        return self.q0 + self.v0 * self.duration
+
+    @property
+    def end_velocity(self) -> float:
+        """Velocity at the end [rad/s]."""
+        return self.v1 if self.kind == "ramp" else (0.0 if self.kind in ("hold", "move") else self.v0)
+
+    def evaluate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Position, velocity and acceleration at times ``t`` inside the segment."""
+        tau = t - self.t0
+        zero = np.zeros_like(tau)
+        if self.kind == "hold":
+            return zero + self.q0, zero, zero
+        if self.kind == "cruise":
+            return self.q0 + self.v0 * tau, zero + self.v0, zero
+        T = self.duration
+        s = np.clip(tau / T, 0.0, 1.0)
+        if self.kind == "move":
+            d = self.distance
+            return (self.q0 + d * _smooth(s), d / T * _smooth_d1(s), d / T**2 * _smooth_d2(s))
+        dv = self.v1 - self.v0
+        if self.shape == "linear":
+            return (self.q0 + self.v0 * tau + 0.5 * dv * T * s * s,
+                    self.v0 + dv * s, zero + dv / T)
+        return (self.q0 + self.v0 * tau + dv * T * _smooth_integral(s),
+                self.v0 + dv * _smooth(s), dv / T * _smooth_d1(s))
+
+
+def _smooth(s):
+    """Quintic rest-to-rest shape 10 s^3 - 15 s^4 + 6 s^5 (zero slope and curvature at ends)."""
+    return s**3 * (10.0 - 15.0 * s + 6.0 * s * s)
+
+
+def _smooth_d1(s):
+    return 30.0 * s * s * (1.0 - s) ** 2
+
+
+def _smooth_d2(s):
+    return 60.0 * s * (1.0 - s) * (1.0 - 2.0 * s)
+
+
+def _smooth_integral(s):
+    """Integral of :func:`_smooth` from 0 to ``s``."""
+    return s**4 * (2.5 - 3.0 * s + s * s)
+
+
+@dataclass(frozen=True)
+class Load:
+    """An external torque on the joint [Nm], switched on at ``start`` and off at ``stop``.
+
+    It rises and falls smoothly over ``rise`` seconds (a contact is never a perfect step).
+    ``known`` loads (payloads, calibration weights) enter ``torque_ref``; unknown ones
+    (contact) only ``torque_true``.
+    """
+
+    torque: float
+    start: float
+    stop: float = float("inf")
+    rise: float = DEFAULT_RISE
+    known: bool = False
+
+    def evaluate(self, t: np.ndarray) -> np.ndarray:
+        """The torque at times ``t`` [Nm]."""
+        on = _smooth(np.clip((t - self.start) / self.rise, 0.0, 1.0))
+        off = _smooth(np.clip((t - self.stop) / self.rise, 0.0, 1.0)) if np.isfinite(self.stop) else 0.0
+        return self.torque * (on - off)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One scenario: the joint, its trajectory, the external loads and the scored window.
+
+    Attributes
+    ----------
+    name, path, description
+        File name without suffix, the file it came from, and what it is for.
+    spec
+        The joint's datasheet values (:class:`~rippleb.data.JointSpec`).
+    duration
+        Length of the log [s].
+    scored
+        Whether ``rippleb run`` scores it by default (``calibration`` is not).
+    evaluation
+        The scored window ``(start, stop)`` [s].
+    temperature_c
+        Joint (lubricant) temperature [deg C]; friction depends on it.
+    robot, joint, posture
+        The ``example-robot-data`` arm, its moving joint, and the angles [rad] of the others.
+    segments, loads
+        The resolved trajectory and the external torques.
+    """
+
+    name: str
+    path: Path
+    description: str
+    spec: JointSpec
+    duration: float
+    scored: bool
+    evaluation: tuple[float, float]
+    temperature_c: float
+    robot: str
+    joint: str
+    posture: tuple[tuple[str, float], ...]
+    segments: tuple[Segment, ...]
+    loads: tuple[Load, ...]
+
+    def trajectory(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Commanded joint position, velocity, acceleration at times ``t``."""
+        return evaluate_segments(self.segments, np.asarray(t, dtype=float))
+
+    def external_torque(self, t: np.ndarray, *, known_only: bool = False) -> np.ndarray:
+        """Sum of the external torques at ``t`` [Nm] (only known ones if ``known_only``)."""
+        total = np.zeros_like(np.asarray(t, dtype=float))
+        for load in self.loads:
+            if load.known or not known_only:
+                total = total + load.evaluate(t)
+        return total
+
+
+def evaluate_segments(segments, t: np.ndarray):
+    """Evaluate a resolved segment list at times ``t``, vectorised per segment.
+
+    The parser ends every list with an open ``cruise`` at the final velocity, so times
+    after the last planned segment keep that velocity (a hold if it is zero).
+    """
+    q, qd, qdd = (np.empty_like(t) for _ in range(3))
+    starts = np.array([seg.t0 for seg in segments])
+    index = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(segments) - 1)
+    for i, seg in enumerate(segments):
+        sel = index == i
+        if sel.any():
+            q[sel], qd[sel], qdd[sel] = seg.evaluate(t[sel])
+    return q, qd, qdd
+
+
+# ----------------------------------------------------------------------------- loading
+
+
+def _scenario_dir():
+    return importlib.resources.files("rippleb.scenarios")
+
+
+def builtin_scenarios() -> list[str]:
+    """Names of the built-in scenarios, sorted (``calibration`` included)."""
+    return sorted(entry.name[:-5] for entry in _scenario_dir().iterdir()
+                  if entry.name.endswith(".toml"))
+
+
+def scored_scenarios() -> list[str]:
+    """Built-in scenarios scored by default: all but those with ``scored = false``."""
+    return [name for name in builtin_scenarios() if load_scenario(name).scored]
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """Load a built-in scenario by name, or a scenario file by path.
+
+    Raises
+    ------
+    InputError
+        One line ``<file>: <key>: <what is wrong>`` for a file that is not TOML, an
+        unknown key, a wrong type or an impossible value; or for an unknown name.
+    """
+    text, path, name = _read_source(name_or_path)
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{path}: not valid TOML: {exc}") from None
+    return _Parser(path, name).scenario(raw)
+
+
+def _read_source(name_or_path) -> tuple[str, Path, str]:
+    candidate = Path(name_or_path)
+    if candidate.suffix == ".toml" or candidate.exists():
+        if not candidate.is_file():
+            raise InputError(f"{candidate}: no such scenario file")
+        try:
+            return candidate.read_text(encoding="utf-8"), candidate, candidate.stem
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InputError(f"{candidate}: cannot read: {exc}") from None
+    name = str(name_or_path)
+    resource = _scenario_dir() / f"{name}.toml"
+    if not resource.is_file():
+        close = difflib.get_close_matches(name, builtin_scenarios(), n=3)
+        hint = f" (did you mean {', '.join(close)}?)" if close else ""
+        raise InputError(f"{name}: unknown scenario{hint}; built-ins: "
+                         f"{', '.join(builtin_scenarios())}")
+    return resource.read_text(encoding="utf-8"), Path(str(resource)), name
+
+
+class _Parser:
+    """Checks a parsed TOML document key by key and builds the :class:`Scenario`."""
+
+    def __init__(self, path: Path, name: str):
+        self.path, self.name = path, name
+
+    def fail(self, key: str, what: str):
+        raise InputError(f"{self.path}: {key}: {what}")
+
+    def table(self, raw, allowed: dict, where: str) -> dict:
+        """Check keys and types of one table; return it."""
+        if not isinstance(raw, dict):
+            self.fail(where, f"must be a table, got {type(raw).__name__}")
+        for key, value in raw.items():
+            full = f"{where}.{key}" if where else key
+            if key not in allowed:
+                close = difflib.get_close_matches(key, list(allowed), n=3)
+                hint = f"; did you mean {', '.join(close)}?" if close else \
+                    f"; valid keys: {', '.join(allowed)}"
+                self.fail(full, f"unknown key{hint}")
+            types = allowed[key]
+            if isinstance(value, bool) and bool not in types or not isinstance(value, types):
+                self.fail(full, f"must be {_type_name(types[0])}, got {type(value).__name__}")
+            if isinstance(value, float) and not np.isfinite(value):
+                self.fail(full, f"must be finite, got {value}")
+        return raw
+
+    def scenario(self, raw: dict) -> Scenario:
+        top = self.table(raw, _TOP_KEYS, "")
+        spec = self.spec(top.get("joint", {}))
+        robot, joint, posture = self.robot(top.get("robot", {}))
+        segments = self.segments(top.get("trajectory", {}))
+        end = segments[-1].t0
+        duration = float(top.get("duration", end))
+        if duration <= 0:
+            self.fail("duration", f"must be positive, got {duration}")
+        if duration * spec.fs < 2 * spec.block_size:
+            self.fail("duration", f"{duration} s is shorter than two control ticks")
+        loads = tuple(self.load(item, i) for i, item in enumerate(top.get("load", [])))
+        evaluation = self.evaluation(top.get("evaluation", {}), duration)
+        return Scenario(name=self.name, path=self.path,
+                        description=top.get("description", "").strip(),
+                        spec=spec, duration=duration, scored=top.get("scored", True),
+                        evaluation=evaluation,
+                        temperature_c=float(top.get("temperature_c", DEFAULT_TEMPERATURE_C)),
+                        robot=robot, joint=joint, posture=posture,
+                        segments=segments, loads=loads)
+
+    def spec(self, raw) -> JointSpec:
+        values = self.table(raw, _JOINT_KEYS, "joint")
+        for key, value in values.items():
+            if value <= 0:
+                self.fail(f"joint.{key}", f"must be positive, got {value}")
+        spec = JointSpec(**{k: (v if k == "counts_per_rev" else float(v)) for k, v in values.items()})
+        if spec.control_rate > spec.fs:
+            self.fail("joint.control_rate", f"{spec.control_rate} exceeds fs {spec.fs}")
+        return spec
+
+    def robot(self, raw):
+        from rippleb import robot as arm
+
+        values = self.table(raw, _ROBOT_KEYS, "robot")
+        name = values.get("name", DEFAULT_ROBOT)
+        known = arm.robot_names()
+        if name not in known:
+            close = difflib.get_close_matches(name, known, n=3)
+            self.fail("robot.name", f"unknown robot {name!r}"
+                      + (f"; did you mean {', '.join(close)}?" if close else ""))
+        joints = arm.joint_names(name)
+        joint = values.get("joint", DEFAULT_JOINT if name == DEFAULT_ROBOT else joints[0])
+        if joint not in joints:
+            self.fail("robot.joint", f"{name} has no revolute joint {joint!r}; "
+                      f"its joints: {', '.join(joints)}")
+        posture = values.get("posture", {})
+        for key, value in posture.items():
+            if key not in joints or key == joint:
+                self.fail(f"robot.posture.{key}", f"not a held joint of {name}; "
+                          f"held joints: {', '.join(j for j in joints if j != joint)}")
+            if isinstance(value, bool) or not isinstance(value, _NUMBER):
+                self.fail(f"robot.posture.{key}", f"must be a number, got {type(value).__name__}")
+        return name, joint, tuple(sorted((k, float(v)) for k, v in posture.items()))
+
+    def segments(self, raw) -> tuple[Segment, ...]:
+        values = self.table(raw, _TRAJ_KEYS, "trajectory")
+        items = values.get("segment", [])
+        if not items:
+            self.fail("trajectory.segment", "needs at least one segment")
+        t, q, v = 0.0, float(values.get("start", 0.0)), 0.0
+        out = []
+        for i, item in enumerate(items):
+            seg = self.segment(item, f"trajectory.segment[{i}]", t, q, v)
+            out.append(seg)
+            t, q, v = seg.t1, seg.q1, seg.end_velocity
+        # Open end: keep the final velocity (a hold at rest) for any time after the plan.
+        out.append(Segment("cruise", t, 1.0, q, v))
+        return tuple(out)
+
+    def segment(self, raw, where: str, t: float, q: float, v: float) -> Segment:
+        values = self.table(raw, _SEGMENT_KEYS, where)
+        kind = values.get("kind")
+        if kind not in SEGMENT_KINDS:
+            self.fail(f"{where}.kind", f"must be one of {', '.join(SEGMENT_KINDS)}, got {kind!r}")
+        needed = {"hold": {"duration"}, "move": {"duration"}, "ramp": {"duration", "velocity"},
+                  "cruise": {"duration"}}[kind]
+        optional = {"move": {"to", "by"}, "ramp": {"shape"}}.get(kind, set())
+        for key in values:
+            if key != "kind" and key not in needed | optional:
+                self.fail(f"{where}.{key}", f"not used by a {kind} segment")
+        for key in needed - set(values):
+            self.fail(f"{where}.{key}", f"missing (a {kind} segment needs {', '.join(sorted(needed))})")
+        duration = float(values["duration"])
+        if duration < 0 or (duration == 0 and kind != "hold"):
+            self.fail(f"{where}.duration", f"must be {'>= 0' if kind == 'hold' else '> 0'}, "
+                      f"got {duration}")
+        if kind in ("hold", "move") and abs(v) > 1e-12:
+            self.fail(f"{where}.kind", f"a {kind} starts at rest but the joint moves at "
+                      f"{v:g} rad/s; ramp to velocity = 0 first")
+        if kind == "move":
+            if ("to" in values) == ("by" in values):
+                self.fail(where, "a move needs exactly one of to, by")
+            distance = float(values["to"]) - q if "to" in values else float(values["by"])
+            return Segment("move", t, duration, q, 0.0, distance=distance)
+        if kind == "ramp":
+            shape = values.get("shape", "smooth")
+            if shape not in ("smooth", "linear"):
+                self.fail(f"{where}.shape", f"must be smooth or linear, got {shape!r}")
+            return Segment("ramp", t, duration, q, v, v1=float(values["velocity"]), shape=shape)
+        return Segment(kind, t, duration, q, v if kind == "cruise" else 0.0)
+
+    def load(self, raw, i: int) -> Load:
+        where = f"load[{i}]"
+        values = self.table(raw, _LOAD_KEYS, where)
+        for key in ("torque", "start"):
+            if key not in values:
+                self.fail(f"{where}.{key}", "missing")
+        load = Load(torque=float(values["torque"]), start=float(values["start"]),
+                    stop=float(values.get("stop", float("inf"))),
+                    rise=float(values.get("rise", DEFAULT_RISE)),
+                    known=values.get("known", False))
+        if load.rise <= 0:
+            self.fail(f"{where}.rise", f"must be positive, got {load.rise}")
+        if load.start < 0:
+            self.fail(f"{where}.start", f"must be >= 0, got {load.start}")
+        if load.stop < load.start + load.rise:
+            self.fail(f"{where}.stop", f"must be at least start + rise ({load.start + load.rise})")
+        return load
+
+    def evaluation(self, raw, duration: float) -> tuple[float, float]:
+        values = self.table(raw, _EVAL_KEYS, "evaluation")
+        start = float(values.get("start", 0.0))
+        stop = float(values.get("stop", duration))
+        if not 0 <= start < stop <= duration + 1e-9:
+            self.fail("evaluation", f"need 0 <= start < stop <= duration ({duration}), "
+                      f"got start {start}, stop {stop}")
+        return start, stop
+
+
+def _type_name(kind) -> str:
+    return {float: "a number", int: "an integer", str: "a string", bool: "true or false",
+            dict: "a table", list: "an array of tables"}[kind]

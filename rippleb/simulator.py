@@ -1,0 +1,312 @@
+"""The joint simulator: arm load, harmonic drive, strain bridge, encoder, motor current.
+
+``simulate(scenario, seed)`` evaluates everything analytically and vectorised on the
+DAQ grid ``t = k / fs``. The device (the hidden truth of one joint: gauge errors,
+ripple, friction, offsets) comes from ``Device.from_seed(seed)``; the measurement
+noise comes from a second generator seeded by ``(seed, scenario name)``, so the
+calibration log and an evaluation log of one seed share the device but not the noise.
+
+Every default value below is listed with its source in ``docs/physics.md``.
+
+Sign conventions
+----------------
+Positive joint torque ``tau`` drives the joint in the positive ``q`` direction. The motor
+angle is counted so that ``theta_m = N (q + twist(tau))`` (the gear's sign inversion is
+folded into the encoder's counting direction). The motor torque that produces current is
+``tau / N`` plus everything the motor must overcome on its own shaft: rotor inertia,
+friction opposing the motor velocity, and cogging.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rippleb.data import JointSpec, SensorLog
+from rippleb.errors import InputError
+from rippleb.scenario import Scenario, load_scenario
+
+# --- strain bridge and DAQ (docs/physics.md, "Strain bridge", "DAQ") ---
+STRAIN_GAIN = 0.1            # V/Nm after the bridge amplifier; estimate, rated 51 Nm -> 5.1 V
+STRAIN_RANGE = 10.0          # +-V of the strain ADC
+STRAIN_BITS = 16
+STRAIN_NOISE = 1.0e-3        # V RMS, amplifier + ADC noise at 20 kHz bandwidth; estimate
+CURRENT_RANGE = 20.0         # +-A of the current ADC
+CURRENT_BITS = 12
+CURRENT_NOISE = 0.03         # A RMS, current-sense noise; estimate
+REFERENCE_TEMPERATURE_C = 25.0
+
+# --- ripple: orders of the wave-generator angle and nominal amplitudes in Nm ---
+# (order, base amplitude [Nm], load-proportional amplitude [Nm per Nm of |tau|])
+RIPPLE_ORDERS = (
+    (1, 0.05, 0.002),
+    (2, 0.25, 0.012),
+    (4, 0.60, 0.035),        # dominant: two sensing elements x two lobes (paper Sec. II-B)
+    (6, 0.05, 0.003),
+    (8, 0.15, 0.008),
+)
+RIPPLE_SPREAD = 0.3          # log-normal sigma of the device-to-device amplitude spread
+
+# --- harmonic drive stiffness, size 25: a smooth fit of the catalogue's K1/K3 curve ---
+STIFFNESS_LOW = 3.1e4        # Nm/rad near zero torque (catalogue K1)
+STIFFNESS_HIGH = 5.7e4       # Nm/rad at high torque (catalogue K3)
+STIFFNESS_KNEE = 22.0        # Nm: where the stiffness has moved half-way; fit, see physics.md
+
+# --- motor-side friction at 25 deg C, Nm on the motor shaft ---
+FRICTION = dict(coulomb=0.025, static=0.04, stribeck_speed=3.0, viscous=1.5e-4,
+                load=0.12, ripple1=0.10, ripple2=0.06)
+SIGN_SMOOTHING = 0.02        # rad/s: tanh width of the friction sign at the motor
+VISCOUS_TEMP_COEFF = 0.025   # 1/K: viscous friction ~ exp(-c (T - 25))
+COULOMB_TEMP_COEFF = 0.008   # 1/K
+COGGING = 0.004              # Nm on the motor shaft
+COGGING_ORDER = 24           # periods per motor revolution (8 poles, 12 slots)
+# --- output (cross-roller) bearing friction, Nm on the joint side ---
+OUTPUT_FRICTION = dict(coulomb=0.3, viscous=0.8)
+OUTPUT_SIGN_SMOOTHING = 0.005   # rad/s at the joint: bearing pre-sliding; estimate
+
+
+def stable_hash(text: str) -> int:
+    """A 64-bit hash of ``text`` that is the same in every process (unlike ``hash``)."""
+    return int.from_bytes(hashlib.sha256(text.encode()).digest()[:8], "little")
+
+
+def _check_seed(seed) -> int:
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputError(f"seed: must be a non-negative integer, got {seed!r}")
+    return int(seed)
+
+
+@dataclass(frozen=True)
+class Device:
+    """The hidden truth of one simulated joint. Methods never see it.
+
+    Attributes
+    ----------
+    seed
+        The seed that drew it.
+    gain
+        Strain bridge gain [V/Nm], including the gauge misalignment error
+        (the paper's Delta_t, eq. 4).
+    offset, offset_temp_coeff, drift_rate
+        Bridge zero [V], its thermal shift [V/K] and the slow drift within a run [V/s].
+    ripple_orders, ripple_base, ripple_load, ripple_phase_base, ripple_phase_load
+        The radial-strain ripple (the paper's Delta_r, eq. 5) per order of the wave
+        generator angle: amplitudes [Nm] and [Nm/Nm] and phases [rad].
+    encoder_zero
+        Motor angle [rad] when the joint is at ``q = 0`` without load.
+    friction
+        Motor-side friction parameters at 25 deg C (see ``FRICTION``).
+    friction_phase
+        Phases [rad] of the 1x and 2x friction ripple and of cogging.
+    output_friction
+        Output bearing friction (Coulomb [Nm], viscous [Nm s/rad]).
+    current_offset
+        Current-sense offset [A].
+    """
+
+    seed: int
+    gain: float
+    offset: float
+    offset_temp_coeff: float
+    drift_rate: float
+    ripple_orders: tuple[int, ...]
+    ripple_base: tuple[float, ...]
+    ripple_load: tuple[float, ...]
+    ripple_phase_base: tuple[float, ...]
+    ripple_phase_load: tuple[float, ...]
+    encoder_zero: float
+    friction: dict = field(hash=False)
+    friction_phase: tuple[float, float, float]
+    output_friction: tuple[float, float]
+    current_offset: float
+
+    @classmethod
+    def from_seed(cls, seed: int) -> "Device":
+        """Draw the device of ``seed``; the same seed always gives the same device."""
+        seed = _check_seed(seed)
+        rng = np.random.default_rng(np.random.SeedSequence([seed, stable_hash("device")]))
+        orders = tuple(o for o, _, _ in RIPPLE_ORDERS)
+        spread = lambda size: np.exp(RIPPLE_SPREAD * rng.standard_normal(size))  # noqa: E731
+        k = len(orders)
+        base = np.array([b for _, b, _ in RIPPLE_ORDERS]) * spread(k)
+        load = np.array([s for _, _, s in RIPPLE_ORDERS]) * spread(k)
+        friction = {key: value * float(np.exp(0.15 * rng.standard_normal()))
+                    for key, value in FRICTION.items()}
+        return cls(
+            seed=seed,
+            gain=STRAIN_GAIN * (1.0 + 0.05 * rng.standard_normal()),
+            offset=0.05 * rng.standard_normal(),
+            offset_temp_coeff=5e-4 * rng.standard_normal(),
+            drift_rate=1e-3 * rng.standard_normal(),
+            ripple_orders=orders,
+            ripple_base=tuple(base),
+            ripple_load=tuple(load),
+            ripple_phase_base=tuple(rng.uniform(0, 2 * np.pi, k)),
+            ripple_phase_load=tuple(rng.uniform(0, 2 * np.pi, k)),
+            encoder_zero=float(rng.uniform(0, 2 * np.pi)),
+            friction=friction,
+            friction_phase=tuple(rng.uniform(0, 2 * np.pi, 3)),
+            output_friction=tuple(v * float(np.exp(0.2 * rng.standard_normal()))
+                                  for v in OUTPUT_FRICTION.values()),
+            current_offset=0.02 * rng.standard_normal(),
+        )
+
+    def ripple(self, wave_angle: np.ndarray, torque: np.ndarray) -> np.ndarray:
+        """Ripple in torque units [Nm]: a function of wave-generator angle and load only."""
+        load = np.abs(torque)
+        out = np.zeros_like(wave_angle)
+        for o, a, b, pa, pb in zip(self.ripple_orders, self.ripple_base, self.ripple_load,
+                                   self.ripple_phase_base, self.ripple_phase_load):
+            out += a * np.cos(o * wave_angle + pa) + b * load * np.cos(o * wave_angle + pb)
+        return out
+
+    def motor_friction(self, velocity: np.ndarray, torque: np.ndarray, angle: np.ndarray,
+                       temperature_c: float, gear_ratio: float) -> np.ndarray:
+        """Friction torque on the motor shaft [Nm], opposing the motor velocity [rad/s].
+
+        Load-dependent Stribeck friction ``[F_c + mu |tau|/N + (F_s - F_c) exp(-(w/w_s)^2)]
+        sgn(w) + b w`` with a 1x and 2x ripple of the Coulomb part over the wave-generator
+        revolution, all scaled by the lubricant temperature. ``sgn`` is ``tanh(w/eps)``,
+        because the true friction at a stop is set by the stiction the load needs, not by
+        a jump; the smoothing width is far below the slowest scenario speed. ``torque`` is
+        the joint torque [Nm]; ``mu |tau| / N`` is the mesh loss of transmitting it.
+        """
+        f = self.friction
+        dt = temperature_c - REFERENCE_TEMPERATURE_C
+        coulomb_scale = np.exp(-COULOMB_TEMP_COEFF * dt)
+        viscous_scale = np.exp(-VISCOUS_TEMP_COEFF * dt)
+        p1, p2, _ = self.friction_phase
+        ripple = 1.0 + f["ripple1"] * np.cos(angle + p1) + f["ripple2"] * np.cos(2 * angle + p2)
+        coulomb = (f["coulomb"] + f["load"] * np.abs(torque) / gear_ratio
+                   + (f["static"] - f["coulomb"]) * np.exp(-(velocity / f["stribeck_speed"]) ** 2))
+        return (coulomb_scale * coulomb * ripple * np.tanh(velocity / SIGN_SMOOTHING)
+                + viscous_scale * f["viscous"] * velocity)
+
+    def cogging(self, angle: np.ndarray) -> np.ndarray:
+        """Cogging torque of the motor [Nm] at motor angle ``angle``."""
+        return COGGING * np.cos(COGGING_ORDER * angle + self.friction_phase[2])
+
+    def output_bearing_friction(self, velocity: np.ndarray, temperature_c: float) -> np.ndarray:
+        """Cross-roller bearing friction on the joint side [Nm] at joint velocity [rad/s]."""
+        coulomb, viscous = self.output_friction
+        scale = np.exp(-VISCOUS_TEMP_COEFF * (temperature_c - REFERENCE_TEMPERATURE_C))
+        return coulomb * np.tanh(velocity / OUTPUT_SIGN_SMOOTHING) + scale * viscous * velocity
+
+
+@dataclass(frozen=True, eq=False)
+class Simulation:
+    """One simulated run: the log plus the truth the runner and metrics need.
+
+    Attributes
+    ----------
+    log
+        :class:`~rippleb.data.SensorLog` with all six columns;
+        ``meta = {"scenario": name, "seed": seed}``.
+    moving
+        Per sample: the commanded joint velocity is non-zero.
+    wave_angle
+        True wave-generator (= motor) angle [rad].
+    joint_velocity
+        True joint velocity [rad/s].
+    eval_mask
+        Per sample: inside the scenario's evaluation window.
+    scenario, device
+        What was simulated.
+    """
+
+    log: SensorLog
+    moving: np.ndarray
+    wave_angle: np.ndarray
+    joint_velocity: np.ndarray
+    eval_mask: np.ndarray
+    scenario: Scenario
+    device: Device
+
+
+def twist(torque: np.ndarray) -> np.ndarray:
+    """Torsional deflection of the drive [rad] under ``torque``.
+
+    ``tau / K_high + (1/K_low - 1/K_high) T_knee tanh(tau / T_knee)``: stiffness
+    ``K_low`` at zero torque rising smoothly to ``K_high``. Smooth, because the motor
+    acceleration follows the second derivative of the twist; the catalogue's
+    piecewise-linear curve would put impulses into the motor current at its corners.
+    """
+    soft = 1.0 / STIFFNESS_LOW - 1.0 / STIFFNESS_HIGH
+    return torque / STIFFNESS_HIGH + soft * STIFFNESS_KNEE * np.tanh(torque / STIFFNESS_KNEE)
+
+
+def quantise(values: np.ndarray, full_scale: float, bits: int) -> np.ndarray:
+    """An ADC of ``+-full_scale`` and ``bits`` bits: round to a step, saturate at the rails."""
+    step = 2.0 * full_scale / 2**bits
+    codes = np.clip(np.round(values / step), -(2 ** (bits - 1)), 2 ** (bits - 1) - 1)
+    return codes * step
+
+
+def simulate(scenario: Scenario | str, seed: int = 0) -> Simulation:
+    """Simulate ``scenario`` (object, built-in name or TOML path) on the device of ``seed``."""
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    seed = _check_seed(seed)
+    spec: JointSpec = sc.spec
+    device = Device.from_seed(seed)
+    noise = np.random.default_rng(np.random.SeedSequence([seed, stable_hash(sc.name)]))
+
+    n = max(2, int(round(sc.duration * spec.fs)))
+    t = np.arange(n) / spec.fs
+    q, qd, qdd = sc.trajectory(t)
+    table = _load_table(sc, q)
+    tau_true = (table.torque(q, qd, qdd) + device.output_bearing_friction(qd, sc.temperature_c)
+                + sc.external_torque(t))
+    tau_ref = table.model_torque(q, qdd) + sc.external_torque(t, known_only=True)
+
+    N = spec.gear_ratio
+    deflection = twist(tau_true)
+    theta_m = N * (q + deflection) + device.encoder_zero
+    # The twist changes with the load, so the motor turns a little even when q stands still.
+    twist_rate = np.gradient(deflection, t)
+    w_m = N * (qd + twist_rate)
+    a_m = N * (qdd + np.gradient(twist_rate, t))
+
+    strain = _strain(device, sc, t, theta_m, tau_true, noise)
+    current = _current(device, sc, spec, theta_m, w_m, a_m, tau_true, noise)
+    encoder = np.floor(theta_m / (2 * np.pi) * spec.counts_per_rev).astype(np.int64)
+
+    log = SensorLog(spec=spec, t=t, strain=strain, encoder=encoder, current=current,
+                    torque_true=tau_true, torque_ref=tau_ref,
+                    meta={"scenario": sc.name, "seed": seed})
+    start, stop = sc.evaluation
+    return Simulation(log=log, moving=np.abs(qd) > 1e-12, wave_angle=theta_m,
+                      joint_velocity=qd, eval_mask=(t >= start) & (t <= stop),
+                      scenario=sc, device=device)
+
+
+def _load_table(sc: Scenario, q: np.ndarray):
+    from rippleb import robot
+
+    model = robot.load_model(sc.robot)
+    idx = model.joints[model.getJointId(sc.joint)].idx_q
+    lo, hi = float(q.min()), float(q.max())
+    if lo < model.lowerPositionLimit[idx] or hi > model.upperPositionLimit[idx]:
+        raise InputError(f"{sc.path}: trajectory: {sc.joint} travels over [{lo:.3f}, {hi:.3f}] rad, "
+                         f"outside its limits [{model.lowerPositionLimit[idx]:.3f}, "
+                         f"{model.upperPositionLimit[idx]:.3f}]")
+    return robot.load_table(sc.robot, sc.joint, dict(sc.posture), (lo, hi))
+
+
+def _strain(device: Device, sc: Scenario, t, theta_m, tau, noise) -> np.ndarray:
+    """Bridge voltage (paper eq. 3-5): gain x (torque + ripple) + zero + drift + noise, ADC."""
+    zero = device.offset + device.offset_temp_coeff * (sc.temperature_c - REFERENCE_TEMPERATURE_C)
+    volts = (device.gain * (tau + device.ripple(theta_m, tau)) + zero + device.drift_rate * t
+             + STRAIN_NOISE * noise.standard_normal(len(t)))
+    return quantise(volts, STRAIN_RANGE, STRAIN_BITS)
+
+
+def _current(device: Device, sc: Scenario, spec: JointSpec, theta_m, w_m, a_m, tau, noise):
+    """Motor current [A]: (tau/N + J_m theta_m'' + friction + cogging) / K_t + offset + noise."""
+    motor_torque = (tau / spec.gear_ratio + spec.rotor_inertia * a_m
+                    + device.motor_friction(w_m, tau, theta_m, sc.temperature_c, spec.gear_ratio)
+                    + device.cogging(theta_m))
+    amps = (motor_torque / spec.torque_constant + device.current_offset
+            + CURRENT_NOISE * noise.standard_normal(len(theta_m)))
+    return quantise(amps, CURRENT_RANGE, CURRENT_BITS)

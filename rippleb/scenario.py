@@ -255,6 +255,14 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     return _Parser(path, name).scenario(raw)
 
 
+def scenario_from_dict(raw: dict, name: str = "custom") -> Scenario:
+    """Build a scenario from the parsed form of a TOML file (tests, figures, scripts).
+
+    Checked exactly like a file; errors name ``<name>`` as the file.
+    """
+    return _Parser(Path(f"<{name}>"), name).scenario(raw)
+
+
 def _read_source(name_or_path) -> tuple[str, Path, str]:
     candidate = Path(name_or_path)
     if candidate.suffix == ".toml" or candidate.exists():

@@ -47,7 +47,8 @@ RIPPLE_ORDERS = (
     (6, 0.05, 0.003),
     (8, 0.15, 0.008),
 )
-RIPPLE_SPREAD = 0.3          # log-normal sigma of the device-to-device amplitude spread
+RIPPLE_PHASE_SHIFT = 0.004   # rad/Nm, sigma of the load-induced phase shift; estimate
+RIPPLE_SPREAD = 0.25         # log-normal sigma of the device-to-device amplitude spread; estimate
 
 # --- harmonic drive stiffness, size 25: a smooth fit of the catalogue's K1/K3 curve ---
 STIFFNESS_LOW = 3.1e4        # Nm/rad near zero torque (catalogue K1)
@@ -91,9 +92,10 @@ class Device:
         (the paper's Delta_t, eq. 4).
     offset, offset_temp_coeff, drift_rate
         Bridge zero [V], its thermal shift [V/K] and the slow drift within a run [V/s].
-    ripple_orders, ripple_base, ripple_load, ripple_phase_base, ripple_phase_load
+    ripple_orders, ripple_base, ripple_load, ripple_phase, ripple_phase_shift
         The radial-strain ripple (the paper's Delta_r, eq. 5) per order of the wave
-        generator angle: amplitudes [Nm] and [Nm/Nm] and phases [rad].
+        generator angle: amplitude ``base + load |tau|`` [Nm], phase [rad] and the
+        phase shift per Nm of signed torque [rad/Nm] (load turns the strain pattern).
     encoder_zero
         Motor angle [rad] when the joint is at ``q = 0`` without load.
     friction
@@ -114,8 +116,8 @@ class Device:
     ripple_orders: tuple[int, ...]
     ripple_base: tuple[float, ...]
     ripple_load: tuple[float, ...]
-    ripple_phase_base: tuple[float, ...]
-    ripple_phase_load: tuple[float, ...]
+    ripple_phase: tuple[float, ...]
+    ripple_phase_shift: tuple[float, ...]
     encoder_zero: float
     friction: dict = field(hash=False)
     friction_phase: tuple[float, float, float]
@@ -143,8 +145,8 @@ class Device:
             ripple_orders=orders,
             ripple_base=tuple(base),
             ripple_load=tuple(load),
-            ripple_phase_base=tuple(rng.uniform(0, 2 * np.pi, k)),
-            ripple_phase_load=tuple(rng.uniform(0, 2 * np.pi, k)),
+            ripple_phase=tuple(rng.uniform(0, 2 * np.pi, k)),
+            ripple_phase_shift=tuple(RIPPLE_PHASE_SHIFT * rng.standard_normal(k)),
             encoder_zero=float(rng.uniform(0, 2 * np.pi)),
             friction=friction,
             friction_phase=tuple(rng.uniform(0, 2 * np.pi, 3)),
@@ -157,9 +159,9 @@ class Device:
         """Ripple in torque units [Nm]: a function of wave-generator angle and load only."""
         load = np.abs(torque)
         out = np.zeros_like(wave_angle)
-        for o, a, b, pa, pb in zip(self.ripple_orders, self.ripple_base, self.ripple_load,
-                                   self.ripple_phase_base, self.ripple_phase_load):
-            out += a * np.cos(o * wave_angle + pa) + b * load * np.cos(o * wave_angle + pb)
+        for o, a, b, phase, shift in zip(self.ripple_orders, self.ripple_base, self.ripple_load,
+                                         self.ripple_phase, self.ripple_phase_shift):
+            out += (a + b * load) * np.cos(o * wave_angle + phase + shift * torque)
         return out
 
     def motor_friction(self, velocity: np.ndarray, torque: np.ndarray, angle: np.ndarray,

@@ -40,7 +40,7 @@ from rippleb.registry import Registry, one_line
 from rippleb.results import ResultsFile, system_info
 from rippleb.streaming import InvalidOutput, prepare_blocks, stream
 
-DEFAULT_SEEDS = 2
+DEFAULT_SEEDS = 3
 DEFAULT_TIMEOUT_S = 300.0
 DEFAULT_MEMORY_MB = 4096.0
 CALIBRATION = "calibration"

@@ -1,0 +1,200 @@
+"""The ``rippleb`` command: ``list``, ``run``, ``simulate``, ``report``.
+
+Built on argparse (standard library, no extra dependency; subcommands and ``--help``
+are all this CLI needs). Every :class:`~rippleb.errors.RipplebError` becomes one line
+``rippleb: error: ...`` on stderr and exit status 2, with no traceback unless
+``--debug``. An interrupted run (Ctrl-C, SIGTERM) exits 130 after saying where its
+finished rows are.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+from rippleb.errors import InputError, RipplebError
+
+EPILOG = "Run 'rippleb COMMAND --help' for the options of one command."
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``rippleb`` script; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args) or 0
+    except RipplebError as exc:
+        if args.debug:
+            raise
+        print(f"rippleb: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        where = getattr(args, "out_dir", None)
+        kept = f"; finished rows are in {where / 'results.csv'}" if where else ""
+        print(f"rippleb: interrupted{kept}", file=sys.stderr)
+        return 130
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with its four subcommands."""
+    parser = argparse.ArgumentParser(
+        prog="rippleb", epilog=EPILOG,
+        description="Benchmark of torque-ripple cancellation methods for strain-gauge joint "
+                    "torque sensors in harmonic drives.")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks of errors")
+    parser.set_defaults(func=lambda args: parser.print_help(), debug=False)
+    sub = parser.add_subparsers(title="commands", metavar="COMMAND")
+    _add_list(sub)
+    _add_run(sub)
+    _add_simulate(sub)
+    _add_report(sub)
+    return parser
+
+
+def _add_list(sub) -> None:
+    p = sub.add_parser("list", help="list methods (built-in, plugin, broken) and scenarios",
+                       description="List every method with its origin (builtin, plugin, or broken "
+                                   "with its import error) and every built-in scenario.")
+    p.set_defaults(func=cmd_list)
+
+
+def _add_run(sub) -> None:
+    from rippleb.runner import DEFAULT_MEMORY_MB, DEFAULT_SEEDS, DEFAULT_TIMEOUT_S
+
+    p = sub.add_parser(
+        "run", help="run methods on scenarios (or a recorded log) and write results.csv",
+        description="Run every method on every scenario and seed, causally, one control tick at a "
+                    "time, and write one row per method x scenario x seed to DIR/results.csv as it "
+                    "finishes. Defaults: every built-in method, every scored built-in scenario, "
+                    f"{DEFAULT_SEEDS} seeds, out runs/<timestamp>/.")
+    p.add_argument("--methods", help="comma-separated method names, or 'all' to add plugins "
+                                     "(default: every built-in method)")
+    p.add_argument("--scenarios", help="comma-separated scenario names or paths to .toml files "
+                                       "(default: every scored built-in scenario)")
+    p.add_argument("--seeds", type=int, help=f"number of seeds, i.e. simulated devices (default {DEFAULT_SEEDS})")
+    p.add_argument("--seed-start", type=int, help="first seed (default 0)")
+    p.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                   help="rows run in parallel processes (default: the number of CPUs, "
+                        f"{os.cpu_count()} here; use 1 for the least noisy timings)")
+    p.add_argument("--out", type=Path, help="output directory (default runs/<timestamp>/)")
+    p.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT_S,
+                   help=f"seconds one row may take before it is killed (default {DEFAULT_TIMEOUT_S:g}; 0: none)")
+    p.add_argument("--memory-limit", type=float, default=DEFAULT_MEMORY_MB, metavar="MB",
+                   help=f"memory one row may allocate, in MB (default {DEFAULT_MEMORY_MB:g}; 0: none)")
+    p.add_argument("--resume", type=Path, metavar="DIR",
+                   help="finish an interrupted run: run only the rows missing from DIR/results.csv")
+    p.add_argument("--log", type=Path, help="run on a recorded log (.csv or .parquet) instead of scenarios")
+    p.add_argument("--calibration", type=Path,
+                   help="with --log: the calibration log (needs torque_ref); default: the log itself")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_run)
+
+
+def _add_simulate(sub) -> None:
+    p = sub.add_parser("simulate", help="simulate one scenario and write its log",
+                       description="Simulate SCENARIO (a built-in name or a .toml path) on the device "
+                                   "of --seed and write the columns t, strain, encoder, current, "
+                                   "torque_true, torque_ref to FILE (.csv or .parquet).")
+    p.add_argument("scenario", metavar="SCENARIO")
+    p.add_argument("--seed", type=int, default=0, help="device seed (default 0)")
+    p.add_argument("--out", type=Path, required=True, metavar="FILE", help="output .csv or .parquet")
+    p.set_defaults(func=cmd_simulate)
+
+
+def _add_report(sub) -> None:
+    p = sub.add_parser("report", help="summarise a run's results.csv as Markdown",
+                       description="Print a Markdown summary of DIR/results.csv and write it to "
+                                   "DIR/summary.md (and to OUT/ with the raw rows if --out is given).")
+    p.add_argument("dir", type=Path, metavar="DIR")
+    p.add_argument("--out", type=Path, help="also publish summary.md and results.csv here")
+    p.set_defaults(func=cmd_report)
+
+
+def cmd_list(args) -> int:
+    """``rippleb list``."""
+    from rippleb.registry import Registry
+    from rippleb.scenario import builtin_scenarios, load_scenario
+
+    registry = Registry.discover()
+    registry.load_all()
+    print("methods:")
+    for name in registry.names():
+        entry = registry.entries[name]
+        origin = "broken" if entry.broken else entry.origin
+        extra = f"  {entry.error}" if entry.broken else ""
+        print(f"  {name:<28} {origin:<8} {entry.source}{extra}")
+    for module, error in sorted(registry.broken_modules.items()):
+        print(f"  {'?':<28} {'broken':<8} {module}  {error}")
+    print("scenarios:")
+    for name in builtin_scenarios():
+        try:
+            scored = "scored" if load_scenario(name).scored else "not scored"
+        except RipplebError as exc:
+            scored = f"broken  {exc}"
+        print(f"  {name:<28} {scored}")
+    return 0
+
+
+def cmd_run(args) -> int:
+    """``rippleb run``."""
+    from rippleb import runner
+
+    start = time.perf_counter()
+    timeout = args.timeout or None
+    memory = args.memory_limit or None
+    progress = False if args.no_progress else None
+    if args.log is not None:
+        _refuse_with_log(args)
+        args.out_dir = args.out or runner.default_out_dir()
+        frame = runner.run_log(args.log, args.calibration, args.methods, jobs=args.jobs,
+                               out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress)
+    elif args.resume is not None:
+        config = runner.read_config(args.resume)
+        args.out_dir = args.resume
+        frame = runner.run(args.methods or config["methods"], args.scenarios or config["scenarios"],
+                           config["seeds"] if args.seeds is None else args.seeds,
+                           seed_start=args.seed_start or 0, jobs=args.jobs, out=args.resume,
+                           timeout=timeout, memory_mb=memory, resume=True, progress=progress)
+    else:
+        if args.calibration is not None:
+            raise InputError("--calibration only applies with --log")
+        args.out_dir = args.out or runner.default_out_dir()
+        frame = runner.run(args.methods, args.scenarios,
+                           runner.DEFAULT_SEEDS if args.seeds is None else args.seeds,
+                           seed_start=args.seed_start or 0, jobs=args.jobs, out=args.out_dir,
+                           timeout=timeout, memory_mb=memory, progress=progress)
+    from rippleb.report import summary_markdown
+
+    print(summary_markdown(frame))
+    counts = frame["status"].value_counts().to_dict() if len(frame) else {}
+    print(f"\n{len(frame)} rows ({', '.join(f'{v} {k}' for k, v in counts.items()) or 'none'}) "
+          f"in {args.out_dir / 'results.csv'}; total wall time {time.perf_counter() - start:.1f} s")
+    return 0
+
+
+def _refuse_with_log(args) -> None:
+    for flag, value in (("--scenarios", args.scenarios), ("--seeds", args.seeds),
+                        ("--seed-start", args.seed_start), ("--resume", args.resume)):
+        if value is not None:
+            raise InputError(f"{flag} does not apply with --log")
+
+
+def cmd_simulate(args) -> int:
+    """``rippleb simulate``."""
+    from rippleb.data import write_log
+    from rippleb.simulator import simulate
+
+    path = write_log(simulate(args.scenario, args.seed).log, args.out)
+    print(f"wrote {path}")
+    return 0
+
+
+def cmd_report(args) -> int:
+    """``rippleb report``."""
+    from rippleb.report import report
+
+    print(report(args.dir, args.out))
+    return 0

@@ -6,6 +6,7 @@ The public API is re-exported here; see the README for the CLI.
 from rippleb.data import JointSpec, SensorBlock, SensorLog, make_log, read_log, write_log
 from rippleb.errors import InputError, PluginError, RipplebError
 from rippleb.method import Method
+from rippleb.runner import run, run_log
 from rippleb.scenario import Scenario, builtin_scenarios, load_scenario, scored_scenarios
 from rippleb.simulator import Simulation, simulate
 
@@ -26,6 +27,8 @@ __all__ = [
     "load_scenario",
     "make_log",
     "read_log",
+    "run",
+    "run_log",
     "scored_scenarios",
     "simulate",
     "write_log",

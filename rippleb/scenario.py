@@ -265,7 +265,7 @@ def scenario_from_dict(raw: dict, name: str = "custom") -> Scenario:
 
 def _read_source(name_or_path) -> tuple[str, Path, str]:
     candidate = Path(name_or_path)
-    if candidate.suffix == ".toml" or candidate.exists():
+    if candidate.suffix == ".toml" or candidate.is_file():
         if not candidate.is_file():
             raise InputError(f"{candidate}: no such scenario file")
         try:

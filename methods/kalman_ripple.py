@@ -299,8 +299,9 @@ class KalmanRipple(Method):
         for j in range(done):
             last = (j + 1) * D - 1 - first  # block index of the sample that ends tick j
             self._fill(out, block, cursor, last)
-            # linearise the |tau| term of the map at the sign of the prior torque
-            H[j, 0] += load[j] if self.x_[0] > 0 else -load[j] if self.x_[0] < 0 else 0.0
+            # linearise the |tau| term of the map at the sign of the predicted torque
+            prior = self.x_[0] + self.F_[0, 1] * self.x_[1] if self.torque_rate else self.x_[0]
+            H[j, 0] += load[j] if prior > 0 else -load[j] if prior < 0 else 0.0
             kf_step(self.x_, self.P_, self.F_step_, q[j], H[j], y[j], self.r_)
             self.have_estimate_ = True
             self.since_tick_ = 0

@@ -20,7 +20,9 @@ def test_builtins_are_the_design_names_and_calibration_is_not_scored():
 def test_every_builtin_is_short_described_and_in_range(name):
     sc = load_scenario(name)
     assert sc.name == name and sc.description
-    assert 0 < sc.duration <= 8.0
+    # scored scenarios stay short so a full benchmark is quick; calibration is simulated
+    # once per device and sweeps several speeds, so it may be longer
+    assert 0 < sc.duration <= (8.0 if sc.scored else 15.0)
     start, stop = sc.evaluation
     assert 0 <= start < stop <= sc.duration
 

@@ -109,36 +109,40 @@ def kf_step(x, P, F, q, h, z, r):
     return e, s
 
 
-def kf_run_batch(x, P, F, Q, Q_turn, turns, H, z, r):
-    """Run a bank of filters that differ in ``Q`` and ``r`` over the same ticks.
+def kf_run_batch(x, P, F, q, q_turn, turns, H, z, r):
+    """Run a bank of filters that differ in their noise levels over the same ticks.
 
-    Used by :meth:`KalmanRipple.fit` to score a grid of noise levels in one pass.
+    Used by :meth:`KalmanRipple.fit` to score a grid of noise levels in one pass; the
+    equations are those of :func:`kf_step`.
 
     Parameters
     ----------
     x, P
         Initial states ``(G, n)`` and covariances ``(G, n, n)``, updated in place.
     F
-        Transition ``(n, n)``, shared.
-    Q, Q_turn, turns
-        Process noise per tick ``(G, n, n)``, per revolution of the wave generator
-        ``(G, n, n)``, and revolutions turned in each tick ``(T,)``: tick ``t`` uses
-        ``Q + turns[t] Q_turn``.
+        Transition ``(n, n)``, shared; ``None`` for the identity.
+    q, q_turn, turns
+        Diagonal process noise per tick ``(G, n)``, per revolution of the wave
+        generator ``(G, n)``, and revolutions turned in each tick ``(T,)``: tick ``t``
+        adds ``q + turns[t] q_turn`` to the diagonal of ``P``.
+    H, z
+        Measurement rows ``(T, n)`` (the torque column already linearised) and
+        measurements ``(T,)``.
     r
         Measurement variance ``(G,)``.
-    H, z
-        Measurement rows ``(T, n)`` for tick ``T`` (the torque column already
-        linearised) and measurements ``(T,)``.
 
     Returns
     -------
     ndarray, shape ``(G,)``
         The Gaussian log-likelihood of the innovations, summed over ticks.
     """
+    diagonal = np.arange(x.shape[1])
     loglik = np.zeros(len(x))
     for h, zk, turn in zip(H, z, turns):
-        x[:] = x @ F.T
-        P[:] = F @ P @ F.T + Q + turn * Q_turn
+        if F is not None:
+            x[:] = x @ F.T
+            P[:] = F @ P @ F.T
+        P[:, diagonal, diagonal] += q + turn * q_turn
         ph = P @ h
         s = ph @ h + r
         e = zk - x @ h
@@ -254,9 +258,10 @@ class KalmanRipple(Method):
         G = len(pairs)
         x = np.repeat(x0[None], G, axis=0)
         P = np.repeat(P0[None], G, axis=0)
-        Q = np.stack([self._q_torque_matrix(a) for a in pairs[:, 0]])
-        Q_turn = np.stack([self._q_ripple_matrix(b) for b in pairs[:, 1]])
-        loglik = kf_run_batch(x, P, self.F_, Q, Q_turn, turns, H, y, np.full(G, self.r_))
+        q = np.stack([np.diag(self._q_torque_matrix(a)) for a in pairs[:, 0]])
+        q_turn = np.stack([np.diag(self._q_ripple_matrix(b)) for b in pairs[:, 1]])
+        F = self.F_ if self.torque_rate else None
+        loglik = kf_run_batch(x, P, F, q, q_turn, turns, H, y, np.full(G, self.r_))
         best = int(np.argmax(loglik))
         self.q_torque_, self.q_ripple_ = (float(v) for v in pairs[best])
         self.loglik_grid_ = {"q_torque": pairs[:, 0], "q_ripple": pairs[:, 1], "loglik": loglik}

@@ -63,8 +63,8 @@ def moving_from_encoder(encoder: np.ndarray, fs: float, hold_s: float = REST_HOL
     changed = np.zeros(len(encoder), bool)
     changed[1:] = encoder[1:] != encoder[:-1]
     hold = max(1, int(round(hold_s * fs)))
-    # index of the latest change at or before each sample, -inf before the first
-    idx = np.where(changed, np.arange(len(encoder)), -np.iinfo(np.int64).max)
+    # index of the latest change at or before each sample; "long ago" before the first
+    idx = np.where(changed, np.arange(len(encoder)), -hold - 1)
     last = np.maximum.accumulate(idx)
     return (np.arange(len(encoder)) - last) < hold
 

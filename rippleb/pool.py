@@ -22,6 +22,8 @@ from multiprocessing.connection import wait as wait_any
 
 from rippleb.registry import one_line
 
+POLL_S = 0.2
+
 
 @dataclass
 class Finished:
@@ -89,7 +91,9 @@ class Pool:
             if finished or not self._running:
                 return finished
             deadlines = [r.deadline for r in self._running if r.deadline is not None]
-            timeout = max(0.0, min(deadlines) - time.monotonic()) if deadlines else None
+            # Wake at least every POLL_S: a signal caught by another thread (tqdm's
+            # monitor, a timer) only runs its Python handler once the main thread wakes.
+            timeout = min([POLL_S] + [max(0.0, d - time.monotonic()) for d in deadlines])
             handles = [r.conn for r in self._running] + [r.process.sentinel for r in self._running]
             wait_any(handles, timeout)
 
@@ -155,6 +159,9 @@ def _redirect_output(path: str | None) -> None:
     os.dup2(fd, 1)
     os.dup2(fd, 2)
     os.close(fd)
+    # sys.stdout/stderr may be wrappers that bypass fds 1 and 2 (pytest, IDEs): rebind them.
+    sys.stdout = open(1, "w", buffering=1, closefd=False)
+    sys.stderr = open(2, "w", buffering=1, closefd=False)
 
 
 def _limit_memory(memory_mb: float | None) -> None:

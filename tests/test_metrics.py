@@ -1,0 +1,132 @@
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from rippleb.metrics import (Truth, delay_ms, max_error, moving_from_encoder, restart_max_error, rms_error,
+                             score, tick_stats)
+
+FS = 20_000.0
+
+
+def _truth(n=4000, seed=0):
+    # a smooth random signal: broadband enough for an unambiguous correlation peak
+    rng = np.random.default_rng(seed)
+    return np.cumsum(rng.normal(size=n))
+
+
+def _info(n, moving=None, wave=None, true=None, ref=None):
+    return Truth(fs=FS, eval_mask=np.ones(n, bool),
+                 moving=np.ones(n, bool) if moving is None else moving,
+                 wave_angle=np.zeros(n) if wave is None else wave, torque_true=true, torque_ref=ref)
+
+
+@pytest.mark.parametrize("lag", [0, 1, 20, 333, 2000])
+def test_pure_delay_gives_its_delay(lag):
+    x = _truth(12_000)
+    y = np.concatenate([np.full(lag, x[0]), x[: len(x) - lag]])
+    assert delay_ms(y, x, np.ones(len(x), bool), FS) == pytest.approx(1000 * lag / FS)
+
+
+def test_delay_beyond_100_ms_is_clipped_to_the_range():
+    x = _truth(12_000)
+    y = np.concatenate([np.full(3000, x[0]), x[:-3000]])
+    assert 0 <= delay_ms(y, x, np.ones(len(x), bool), FS) <= 100
+
+
+def test_all_zero_estimate_gives_the_rms_of_the_truth():
+    x = _truth()
+    row = score(np.zeros_like(x), _info(len(x), true=x, ref=x))
+    assert row["rms_error_nm"] == pytest.approx(np.sqrt(np.mean(x ** 2)))
+    assert row["max_error_nm"] == pytest.approx(np.max(np.abs(x)))
+
+
+def test_perfect_estimate_gives_zero_error():
+    x = _truth()
+    row = score(x.copy(), _info(len(x), true=x, ref=x + 1.0))
+    assert row["rms_error_nm"] == 0 and row["max_error_nm"] == 0
+    assert row["delay_ms"] == 0
+    assert row["rms_error_ref_nm"] == pytest.approx(1.0)
+
+
+def test_window_selects_the_samples():
+    x = np.zeros(100)
+    y = np.zeros(100)
+    y[:10] = 5.0
+    mask = np.zeros(100, bool)
+    mask[10:] = True
+    assert rms_error(y, x, mask) == 0
+    assert max_error(y, x, ~mask) == 5
+
+
+def test_missing_truth_gives_nan():
+    x = _truth()
+    row = score(x, _info(len(x), ref=x))
+    assert np.isnan(row["rms_error_nm"]) and row["rms_error_ref_nm"] == 0
+
+
+def test_restart_error_stops_after_two_wave_generator_revolutions():
+    n = 1000
+    moving = np.ones(n, bool)
+    moving[:100] = False
+    wave = np.concatenate([np.zeros(100), np.linspace(0, 6 * np.pi, n - 100)])
+    truth = np.zeros(n)
+    est = np.zeros(n)
+    travel_4pi = 100 + int(np.ceil((4 * np.pi) / (6 * np.pi) * (n - 101)))
+    est[travel_4pi - 5] = 3.0   # inside the two revolutions: counts
+    est[travel_4pi + 20] = 9.0  # after them: does not
+    est[50] = 7.0               # before the restart: does not
+    assert restart_max_error(est, truth, _info(n, moving=moving, wave=wave)) == 3.0
+
+
+def test_restart_and_rest_metrics_are_nan_when_undefined():
+    x = _truth()
+    row = score(x, _info(len(x), true=x))
+    assert np.isnan(row["restart_max_error_nm"])
+    assert np.isnan(row["stopped_rms_error_nm"])
+
+
+def test_stopped_rms_uses_only_samples_at_rest():
+    n = 200
+    moving = np.arange(n) >= 100
+    est = np.where(moving, 10.0, 2.0)
+    row = score(est, _info(n, moving=moving, true=np.zeros(n)))
+    assert row["stopped_rms_error_nm"] == pytest.approx(2.0)
+
+
+def test_moving_from_encoder_holds_for_10_ms():
+    enc = np.zeros(2000, np.int64)
+    enc[500:] = 1
+    moving = moving_from_encoder(enc, FS)
+    assert not moving[:500].any()
+    assert moving[500:700].all() and not moving[700:].any()
+
+
+def test_tick_stats():
+    stats = tick_stats(np.array([1000, 2000, 3000]), 60)
+    assert stats["us_per_tick_p50"] == 2.0
+    assert stats["samples_per_s"] == pytest.approx(60 / 6e-6)
+
+
+finite = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
+
+
+@settings(max_examples=50, deadline=None)
+@given(arrays(float, st.integers(2, 300), elements=finite), arrays(float, 1, elements=finite))
+def test_error_metrics_invariants(truth, shift):
+    mask = np.ones(len(truth), bool)
+    est = truth + shift[0]
+    # a constant offset gives exactly that RMS and max error, whatever the truth
+    assert rms_error(est, truth, mask) == pytest.approx(abs(shift[0]), abs=1e-9)
+    assert max_error(est, truth, mask) == pytest.approx(abs(shift[0]), abs=1e-9)
+    assert rms_error(truth, truth, mask) == 0
+    assert rms_error(est, truth, mask) <= max_error(est, truth, mask) + 1e-12
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2000), st.integers(0, 10_000), st.floats(0.1, 100), st.floats(-50, 50))
+def test_delay_ignores_gain_and_offset(lag, seed, gain, offset):
+    x = _truth(8000, seed)
+    y = gain * np.concatenate([np.full(lag, x[0]), x[: len(x) - lag]]) + offset
+    assert delay_ms(y, x, np.ones(len(x), bool), FS) == pytest.approx(1000 * lag / FS)

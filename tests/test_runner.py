@@ -1,0 +1,251 @@
+import signal
+import threading
+import time
+from types import SimpleNamespace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import rippleb
+from rippleb import InputError, JointSpec, Method, make_log
+from rippleb import runner as runner_mod
+from rippleb.registry import Entry, Registry
+from rippleb.results import COLUMNS
+
+N = 4000  # 0.2 s at 20 kHz: 200 ticks
+
+
+def fake_simulate(scenario, seed):
+    """A tiny simulation: torque is a slow sine, strain carries it plus an order-4 ripple."""
+    name = getattr(scenario, "name", scenario)
+    rng = np.random.default_rng([seed, len(name)])
+    spec = JointSpec()
+    t = np.arange(N) / spec.fs
+    torque = 10 * np.sin(2 * np.pi * 2 * t) + seed
+    wave = 2 * np.pi * 5 * t
+    strain = 0.01 * torque + 0.002 * np.sin(4 * wave)
+    encoder = np.floor(wave / (2 * np.pi) * spec.counts_per_rev)
+    log = make_log(spec, {"t": t, "strain": strain, "encoder": encoder, "current": torque / 7 + rng.normal(size=N),
+                          "torque_true": torque, "torque_ref": torque + 0.1},
+                   meta={"scenario": name, "seed": seed})
+    moving = t > 0.05
+    return SimpleNamespace(log=log, moving=moving, wave_angle=wave, eval_mask=t >= 0.01,
+                           joint_velocity=np.zeros(N))
+
+
+class Perfect(Method):
+    """Cheats with the strain model of fake_simulate, exactly."""
+    name = "perfect"
+
+    def step(self, block):
+        wave = 2 * np.pi * 5 * block.t
+        return (block.strain - 0.002 * np.sin(4 * wave)) / 0.01
+
+
+class Raises(Method):
+    name = "raises"
+
+    def step(self, block):
+        raise RuntimeError("boom\nsecond line")
+
+
+class NaNs(Method):
+    name = "nans"
+
+    def step(self, block):
+        out = np.zeros(len(block))
+        if block.t[0] > 0.1:
+            out[3] = np.nan
+        return out
+
+
+class Short(Method):
+    name = "short"
+
+    def step(self, block):
+        return np.zeros(len(block) - 1)
+
+
+class Strings(Method):
+    name = "strings"
+
+    def step(self, block):
+        return np.array(["x"] * len(block))
+
+
+class Sleeps(Method):
+    name = "sleeps"
+
+    def fit(self, calibration):
+        time.sleep(3600)
+
+
+class Hog(Method):
+    name = "hog"
+
+    def step(self, block):
+        self.keep = getattr(self, "keep", [])
+        self.keep.append(np.ones(50_000_000))   # 400 MB per tick, without bound
+        return np.zeros(len(block))
+
+
+class Chatty(Method):
+    name = "chatty"
+
+    def step(self, block):
+        print("debug output of a plugin")
+        return np.zeros(len(block))
+
+
+class Peeks(Method):
+    """Records what it was given, to check the runner hides the truth."""
+    name = "peeks"
+
+    def fit(self, calibration):
+        assert calibration.torque_true is None and calibration.torque_ref is not None
+
+    def reset(self, spec):
+        self.sizes = []
+
+    def step(self, block):
+        assert not hasattr(block, "torque_true") and not hasattr(block, "torque_ref")
+        if len(block) != 20 or (hasattr(self, "last") and block.t[0] <= self.last):
+            raise AssertionError("blocks are not ticks in time order")
+        self.last = block.t[-1]
+        return np.zeros(len(block))
+
+
+ALL = [Perfect, Raises, NaNs, Short, Strings, Sleeps, Hog, Chatty, Peeks]
+
+
+@pytest.fixture
+def fake(monkeypatch):
+    """Fake simulation and a registry of the test methods plus the built-ins."""
+    import rippleb.simulator
+
+    monkeypatch.setattr(rippleb.simulator, "simulate", fake_simulate)
+    real = Registry.discover
+
+    def discover(group="rippleb.methods"):
+        found = real(group)
+        for cls in ALL:
+            found.entries[cls.name] = Entry(cls.name, "plugin", "tests", cls=cls)
+        return found
+    monkeypatch.setattr(Registry, "discover", classmethod(lambda cls, group="rippleb.methods": discover(group)))
+
+
+def test_misbehaving_methods_get_their_status_and_the_others_complete(fake, tmp_path):
+    names = [c.name for c in ALL] + ["raw"]
+    frame = rippleb.run(methods=names, scenarios=["paper-quintic"], seeds=2, jobs=3, out=tmp_path,
+                        timeout=10, memory_mb=1000)
+    status = {(r.method, r.seed): r.status for r in frame.itertuples()}
+    expected = {"perfect": "ok", "raises": "error", "nans": "invalid", "short": "invalid",
+                "strings": "invalid", "sleeps": "timeout", "hog": "error", "chatty": "ok",
+                "peeks": "ok", "raw": "ok"}
+    assert status == {(m, s): st for m, st in expected.items() for s in (0, 1)}
+    msg = frame.set_index(["method", "seed"])["message"]
+    assert msg["raises", 0] == "RuntimeError: boom"
+    assert "NaN" in msg["nans", 0] and "sample 2023" in msg["nans", 0]
+    assert "shape (19,)" in msg["short", 0]
+    assert "MemoryError" in msg["hog", 0]
+    # every row on disk too, with the standard columns first
+    disk = pd.read_csv(tmp_path / "results.csv")
+    assert list(disk.columns[: len(COLUMNS)]) == list(COLUMNS) and len(disk) == len(frame)
+    assert "debug output" in (tmp_path / "logs" / "chatty--paper-quintic--0.txt").read_text()
+
+
+def test_metrics_and_provenance_of_an_ok_row(fake, tmp_path):
+    frame = rippleb.run(methods="perfect,raw", scenarios="paper-quintic", seeds=[3], out=None)
+    row = frame.set_index("method").loc["perfect"]
+    assert row.rms_error_nm < 1e-3 and row.delay_ms == 0 and row.seed == 3
+    assert row.rms_error_ref_nm == pytest.approx(0.1, abs=1e-3)
+    assert row.us_per_tick_p50 > 0 and row.n_samples == N
+    assert row.rippleb_version == rippleb.__version__ and row.python and row.cpu
+    assert frame.set_index("method").loc["raw"].rms_error_nm > 10 * row.rms_error_nm
+
+
+def test_each_simulation_runs_once_per_run(fake, tmp_path, monkeypatch):
+    calls = tmp_path / "calls"
+
+    def counting(scenario, seed):
+        with open(calls, "a") as fh:   # children are processes: count through a file
+            fh.write(f"{getattr(scenario, 'name', scenario)}/{seed}\n")
+        return fake_simulate(scenario, seed)
+    import rippleb.simulator
+    monkeypatch.setattr(rippleb.simulator, "simulate", counting)
+    rippleb.run(methods="raw,perfect,chatty", scenarios="paper-quintic,creep", seeds=2, jobs=2)
+    lines = calls.read_text().split()
+    assert sorted(lines) == sorted(set(lines)) and len(lines) == 6   # 2 seeds x (2 + calibration)
+
+
+def test_a_failed_simulation_costs_its_rows_only(fake, monkeypatch):
+    import rippleb.simulator
+
+    def flaky(scenario, seed):
+        if getattr(scenario, "name", scenario) == "creep":
+            raise ValueError("bad trajectory")
+        return fake_simulate(scenario, seed)
+    monkeypatch.setattr(rippleb.simulator, "simulate", flaky)
+    frame = rippleb.run(methods="raw", scenarios="creep,paper-quintic", seeds=1)
+    status = dict(zip(frame.scenario, frame.status))
+    assert status == {"creep": "error", "paper-quintic": "ok"}
+    assert "bad trajectory" in frame.set_index("scenario").loc["creep", "message"]
+
+
+def test_resume_runs_only_the_missing_rows(fake, tmp_path):
+    first = rippleb.run(methods="raw", scenarios="paper-quintic", seeds=1, out=tmp_path)
+    both = rippleb.run(methods="raw,perfect", scenarios="paper-quintic", seeds=1, out=tmp_path, resume=True)
+    assert len(both) == 2
+    assert both.set_index("method").loc["raw", "run_id"] == first.loc[0, "run_id"]
+
+
+def test_sigint_keeps_the_finished_rows(fake, tmp_path):
+    # SIGINT arrives while 'sleeps' blocks the run; the rows before it are on disk.
+    timer = threading.Timer(4.0, signal.raise_signal, (signal.SIGINT,))
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        rippleb.run(methods="raw,perfect,sleeps", scenarios="paper-quintic", seeds=1, jobs=1,
+                    out=tmp_path, timeout=None)
+    timer.cancel()
+    disk = pd.read_csv(tmp_path / "results.csv")
+    assert sorted(disk.method) == ["perfect", "raw"] and (disk.status == "ok").all()
+
+
+def test_recorded_log_scores_against_torque_ref(fake, tmp_path):
+    sim = fake_simulate("rec", 0)
+    columns = sim.log.columns()
+    columns.pop("torque_true")
+    path = rippleb.write_log(make_log(JointSpec(), columns), tmp_path / "rec.csv")
+    frame = rippleb.run_log(path, methods="perfect,raw")
+    row = frame.set_index("method").loc["perfect"]
+    assert row.status == "ok" and row.scenario == "log:rec.csv" and row.calibration == "self"
+    assert np.isnan(row.rms_error_nm) and row.rms_error_ref_nm == pytest.approx(0.1, abs=1e-3)
+
+
+def test_recorded_log_without_reference_needs_a_calibration(tmp_path):
+    sim = fake_simulate("rec", 0)
+    columns = {k: v for k, v in sim.log.columns().items() if not k.startswith("torque")}
+    path = rippleb.write_log(make_log(JointSpec(), columns), tmp_path / "rec.parquet")
+    with pytest.raises(InputError, match="--calibration"):
+        rippleb.run_log(path)
+
+
+def test_unwritable_output_directory_is_an_input_error(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    with pytest.raises(InputError, match="cannot write the output directory"):
+        rippleb.run(methods="raw", scenarios="paper-quintic", seeds=1, out=blocker / "sub")
+
+
+def test_unknown_names_are_input_errors():
+    with pytest.raises(InputError, match="did you mean 'raw'"):
+        rippleb.run(methods="rwa")
+    with pytest.raises(InputError, match="did you mean"):
+        rippleb.run(methods="raw", scenarios="paper-quintc")
+
+
+def test_the_real_simulator_runs_the_baselines():
+    frame = rippleb.run(methods="raw,lowpass", scenarios="static-contact", seeds=1)
+    assert (frame.status == "ok").all(), frame.message.tolist()
+    assert np.isfinite(frame.rms_error_nm).all()

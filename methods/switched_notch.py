@@ -25,9 +25,8 @@ least-squares fit of the calibration strain to the known torque.
 
 Examples
 --------
->>> m = SwitchedNotch()
->>> m.n_bands, m.q
-(40, 2.0)
+>>> bank_size(min_speed=1.0, max_speed=50.0, q=4.0, hysteresis=0.2)
+221
 """
 
 from __future__ import annotations
@@ -40,6 +39,7 @@ from rippleb.dsp import biquad_ss, fit_gain_offset, lift, series_ss, steady_stat
 from rippleb.method import Method
 
 OFF = -1  # band index of the pass-through state below the lowest band
+RESIDUAL = 0.1  # ripple fraction a notch may pass at a switching point (-20 dB)
 
 
 def band_centres(min_speed: float, max_speed: float, n_bands: int) -> np.ndarray:
@@ -58,6 +58,20 @@ def band_filter(centre: float, orders, q: float, fs: float):
     if not stages:
         return np.zeros((0, 0)), np.zeros(0), np.zeros((1, 0)), np.ones(1)
     return series_ss(*stages)
+
+
+def bank_size(min_speed: float, max_speed: float, q: float, hysteresis: float,
+              residual: float = RESIDUAL) -> int:
+    """Fewest bands for which the ripple left at a switching point is at most ``residual``.
+
+    A band is left ``0.5 + hysteresis`` spacings away from its centre, a relative
+    mistuning ``delta = (0.5 + hysteresis) * log(spacing)``; a notch of quality ``q``
+    passes about ``2 q delta`` of a sinusoid mistuned by ``delta``. Solving
+    ``2 q delta <= residual`` for the spacing gives the count.
+    """
+    delta = residual / (2.0 * q)
+    spacing = delta / (0.5 + hysteresis)
+    return max(2, int(np.ceil(np.log(max_speed / min_speed) / spacing)) + 1)
 
 
 def select_band(speed: float, current: int, centres: np.ndarray, hysteresis: float) -> int:
@@ -88,7 +102,8 @@ class SwitchedNotch(Method):
         Ripple orders notched, in cycles per wave-generator revolution. The paper's
         dominant orders 2, 4 and 8.
     n_bands
-        Number of bands in the bank.
+        Number of bands in the bank; None for the fewest that leave at most 10 % of
+        the ripple at a switching point (:func:`bank_size`).
     min_speed, max_speed
         Centre speeds of the lowest and highest band [wave-generator rev/s].
     q
@@ -104,7 +119,7 @@ class SwitchedNotch(Method):
 
     name = "switched-notch"
 
-    def __init__(self, orders=(2, 4, 8), n_bands=40, min_speed=0.5, max_speed=60.0, q=2.0,
+    def __init__(self, orders=(2, 4, 8), n_bands=None, min_speed=0.5, max_speed=50.0, q=2.0,
                  hysteresis=0.2, speed_window=10):
         self.orders = orders
         self.n_bands = n_bands
@@ -125,13 +140,15 @@ class SwitchedNotch(Method):
         super().reset(spec)
         if not hasattr(self, "gain_"):
             self.gain_, self.offset_ = 1.0, 0.0
-        self.centres_ = band_centres(self.min_speed, self.max_speed, self.n_bands)
+        n_bands = self.n_bands or bank_size(self.min_speed, self.max_speed, self.q, self.hysteresis)
+        self.centres_ = band_centres(self.min_speed, self.max_speed, n_bands)
         bands = [band_filter(c, self.orders, self.q, spec.fs) for c in self.centres_]
         self.n_states_ = max(b[0].shape[0] for b in bands)
         self.bands_ = [_pad(b, self.n_states_) for b in bands]
         self.tick_ = spec.block_size
         self.lifted_ = {}
-        self.x_ = None                # bank state (n_bands, n_states), set by the first sample
+        self._lifted(self.tick_)      # the runner's block length, built before the first tick
+        self.z_ = None                # bank [state, block] (n_bands, n_states + tick), set on start
         self.band_ = OFF
         self.phase_ = 0               # samples since the last tick boundary
         self.marks_ = []              # encoder counts at the last tick boundaries
@@ -139,7 +156,7 @@ class SwitchedNotch(Method):
     def step(self, block: SensorBlock) -> np.ndarray:
         """Notch the strain with the active band, segment by segment of the tick grid."""
         u = np.asarray(block.strain, dtype=float)
-        if self.x_ is None and len(u):
+        if self.z_ is None and len(u):
             self._start(u[0], int(block.encoder[0]))
         if len(u) == self.tick_ and self.phase_ == 0:     # the runner's case: one segment
             y = self._segment(u)
@@ -158,15 +175,21 @@ class SwitchedNotch(Method):
 
     def _start(self, u0: float, count0: int) -> None:
         """Every band at rest on the first sample, so no filter starts from zero."""
-        self.x_ = np.array([steady_state(A, B, u0) for A, B, _, _ in self.bands_])
+        x = np.array([steady_state(A, B, u0) for A, B, _, _ in self.bands_])
+        # z = [state, input] of every band: the state update is then one batched product
+        self.z_ = np.concatenate([x, np.zeros((len(x), self.tick_))], axis=1)
         self.marks_ = [count0]
 
     def _segment(self, u: np.ndarray) -> np.ndarray:
         """Output of the active band over ``u`` and the whole bank's state update."""
-        Am, R, OT = self._lifted(len(u))
-        x = self.x_
-        y = u.copy() if self.band_ == OFF else OT[self.band_] @ np.concatenate([x[self.band_], u])
-        self.x_ = np.einsum("bij,bj->bi", Am, x) + R @ u
+        W, OT = self._lifted(len(u))
+        z = self.z_
+        n = z.shape[1] - self.tick_
+        m = len(u)
+        z[:, n:n + m] = u
+        zz = z[:, :n + m] if m < self.tick_ else z
+        y = u.copy() if self.band_ == OFF else OT[self.band_] @ zz[self.band_]
+        z[:, :n] = np.einsum("bij,bj->bi", W, zz)
         return y
 
     def _tick_boundary(self, count: int) -> None:
@@ -183,10 +206,9 @@ class SwitchedNotch(Method):
         """Lifted matrices of every band for a segment of ``m`` samples, cached."""
         if m not in self.lifted_:
             parts = [lift(*band, m) for band in self.bands_]
-            Am = np.array([p[2] for p in parts])
-            R = np.array([p[3] for p in parts])
+            W = np.array([np.hstack([p[2], p[3]]) for p in parts])
             OT = np.array([np.hstack([p[0], p[1]]) for p in parts])
-            self.lifted_[m] = (Am, R, OT)
+            self.lifted_[m] = (W, OT)
         return self.lifted_[m]
 
 

@@ -1,0 +1,236 @@
+"""``current-based``: joint torque from motor current with friction compensation.
+
+The paper's comparison method (Sec. IV-B): "friction compensation based on the
+conventional exponential model" and "the low-pass filter with 130 Hz of the cutoff
+frequency". The motor shaft balances
+
+    K_t i = tau / N + J_m a_m + F(w_m) + (load-dependent friction)
+
+so the estimate is
+
+    tau = N (K_t i - J_m a_m - F(w_m) - c) / (g + mu * sgn(w_m) * sgn(tau))
+
+with the exponential (Stribeck) friction
+``F(w) = [F_c + (F_s - F_c) exp(-(w / w_s)^2)] sgn(w) + b w`` on the motor shaft, a
+constant ``c`` (current-sense offset), and a load-dependent part: ``mu`` makes the
+Coulomb friction grow with the transmitted torque (gear efficiency differs between
+driving and back-driving), ``g`` absorbs the part of that growth that is the same in
+both directions and any error of the datasheet ``K_t`` (``g = 1`` for an ideal motor
+and gear). ``K_t``, ``J_m`` and ``N`` come from the :class:`~rippleb.data.JointSpec`;
+``F_c, F_s, w_s, b, c, g, mu`` are identified in :meth:`CurrentBased.fit` from the
+calibration log alone.
+
+Motor velocity and acceleration are causal estimates from the encoder: the count
+difference per sample times ``fs`` through a second-order Butterworth low-pass at
+``velocity_cutoff`` gives ``w_m``; its difference times ``fs`` through a second-order
+Butterworth at ``accel_cutoff`` gives ``a_m``. At rest the friction direction is unknown
+(static friction may hold any value up to ``F_s``), so ``sgn`` is replaced by
+``clip(w / sign_width, -1, 1)``: no friction is compensated at rest. The result goes
+through a second-order Butterworth low-pass at ``cutoff`` (130 Hz, the paper's).
+
+Examples
+--------
+>>> CurrentBased().cutoff
+130.0
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import signal
+from scipy.optimize import lsq_linear
+
+from rippleb.data import JointSpec, SensorBlock, SensorLog
+from rippleb.dsp import biquad_ss, encoder_angle, lift, series_ss, steady_state
+from rippleb.method import Method
+
+
+def stribeck(w: np.ndarray, coulomb: float, static: float, speed: float, viscous: float,
+             sign: np.ndarray | None = None) -> np.ndarray:
+    """The exponential friction model [Nm on the motor] at motor velocity ``w`` [rad/s].
+
+    ``[F_c + (F_s - F_c) exp(-(w / w_s)^2)] sgn(w) + b w``; ``sign`` replaces
+    ``sgn(w)`` when given (a smoothed sign at rest).
+    """
+    w = np.asarray(w, dtype=float)
+    s = np.sign(w) if sign is None else sign
+    return (coulomb + (static - coulomb) * np.exp(-(w / speed) ** 2)) * s + viscous * w
+
+
+def soft_sign(w: np.ndarray, width: float) -> np.ndarray:
+    """``sgn(w)`` outside ``|w| < width``, a linear ramp through zero inside it."""
+    return np.clip(np.asarray(w, dtype=float) / width, -1.0, 1.0)
+
+
+def motion_filter(fs: float, velocity_cutoff: float, accel_cutoff: float):
+    """State space of the encoder motion estimator, input ``fs * diff(angle)`` [rad/s].
+
+    Outputs (rows of C): the motor velocity [rad/s] and acceleration [rad/s^2]. Both
+    stages are second-order Butterworth low-passes (no overshoot to speak of, flat
+    pass band); the acceleration is the filtered difference of the filtered velocity.
+    """
+    lp_v = biquad_ss(*signal.butter(2, velocity_cutoff, fs=fs))
+    diff = biquad_ss(np.array([fs, -fs, 0.0]), np.array([1.0, 0.0, 0.0]))
+    lp_a = biquad_ss(*signal.butter(2, accel_cutoff, fs=fs))
+    A, B, C_a, D_a = series_ss(lp_v, diff, lp_a)
+    C_v = np.zeros_like(C_a)
+    C_v[0, :2] = lp_v[2][0]
+    return A, B, np.vstack([C_v, C_a]), np.array([lp_v[3][0], D_a[0]])
+
+
+def identify_friction(w, load, residual, speeds, sign_width, load_dependent=True):
+    """Least-squares friction parameters, with ``w_s`` from a grid search.
+
+    Parameters
+    ----------
+    w
+        Motor velocity [rad/s] per sample (moving samples only).
+    load
+        Known joint torque over the gear ratio, ``tau / N`` [Nm on the motor].
+    residual
+        ``K_t i - J_m a_m`` [Nm on the motor].
+    speeds
+        Candidate Stribeck speeds ``w_s`` [rad/s].
+    sign_width
+        Width of the soft sign [rad/s].
+    load_dependent
+        If False, ``g = 1`` and ``mu = 0`` are fixed (the plain exponential model).
+
+    Returns
+    -------
+    dict
+        ``coulomb, static, speed, viscous, offset, scale, load`` (the ``F_c, F_s,
+        w_s, b, c, g, mu`` of the module docstring) and ``rms`` of the fit [Nm].
+    """
+    s = soft_sign(w, sign_width)
+    base = np.column_stack([s, w, np.ones_like(w), load, s * np.abs(load)])
+    # physical bounds: F_c >= 0, b >= 0, 0 <= mu < g, F_s >= F_c; with one calibration
+    # speed, Coulomb and viscous friction are nearly collinear and free signs wander
+    lower = [0.0, 0.0, -np.inf, 0.5, 0.0, 0.0]
+    upper = [np.inf, np.inf, np.inf, 2.0, 0.5, np.inf]
+    if not load_dependent:
+        lower[3:5], upper[3:5] = [1.0 - 1e-12, 0.0], [1.0 + 1e-12, 1e-12]
+    best = None
+    for speed in speeds:
+        design = np.column_stack([base, s * np.exp(-(w / speed) ** 2)])
+        coef = lsq_linear(design, residual, bounds=(lower, upper)).x
+        rms = float(np.sqrt(np.mean((design @ coef - residual) ** 2)))
+        if best is None or rms < best[0]:
+            best = (rms, speed, coef)
+    rms, speed, (fc, b, c, g, mu, ds) = best
+    return dict(coulomb=fc, static=fc + ds, speed=speed, viscous=b, offset=c, scale=g,
+                load=mu, rms=rms)
+
+
+class CurrentBased(Method):
+    """Motor-current torque estimate with exponential friction compensation.
+
+    Parameters
+    ----------
+    cutoff
+        Cut-off of the output low-pass [Hz]; 130 Hz in the paper.
+    velocity_cutoff, accel_cutoff
+        Cut-offs of the encoder velocity and acceleration low-passes [Hz].
+    sign_width
+        Motor velocity [rad/s] below which the friction direction is taken as unknown
+        and the compensation ramps to zero.
+    load_dependent
+        Identify the load-dependent Coulomb part ``mu`` and the scale ``g``; if False,
+        ``g = 1`` and ``mu = 0`` (the plain exponential model).
+
+    Where the defaults come from is in ``docs/methods/current-based.md``.
+    """
+
+    name = "current-based"
+
+    def __init__(self, cutoff=130.0, velocity_cutoff=50.0, accel_cutoff=50.0, sign_width=0.5,
+                 load_dependent=True):
+        self.cutoff = cutoff
+        self.velocity_cutoff = velocity_cutoff
+        self.accel_cutoff = accel_cutoff
+        self.sign_width = sign_width
+        self.load_dependent = load_dependent
+
+    # -- identification --------------------------------------------------------------
+    def fit(self, calibration: SensorLog) -> None:
+        """Identify the friction model from the calibration log and its known torque.
+
+        Velocity and acceleration are the zero-phase (forward-backward) versions of
+        the streaming estimators: offline, the fit need not suffer their delay.
+        """
+        spec = calibration.spec
+        w, a = self._offline_motion(calibration.encoder, spec)
+        load = np.asarray(calibration.torque_ref, dtype=float) / spec.gear_ratio
+        residual = spec.torque_constant * np.asarray(calibration.current) - spec.rotor_inertia * a
+        moving = np.abs(w) > self.sign_width
+        speeds = np.geomspace(0.2, 50.0, 40)
+        if moving.sum() < 10:
+            raise ValueError("current-based: the calibration log has no motion to identify friction")
+        self.friction_ = identify_friction(w[moving], load[moving], residual[moving], speeds,
+                                           self.sign_width, self.load_dependent)
+
+    def _offline_motion(self, encoder: np.ndarray, spec: JointSpec):
+        """Zero-phase motor velocity and acceleration of a whole log."""
+        angle = encoder_angle(encoder, spec.counts_per_rev)
+        rate = np.diff(angle, prepend=angle[0]) * spec.fs
+        b_v, a_v = signal.butter(2, self.velocity_cutoff, fs=spec.fs)
+        w = signal.filtfilt(b_v, a_v, rate)
+        b_a, a_a = signal.butter(2, self.accel_cutoff, fs=spec.fs)
+        a = signal.filtfilt(b_a, a_a, np.gradient(w) * spec.fs)
+        return w, a
+
+    # -- streaming -------------------------------------------------------------------
+    def reset(self, spec: JointSpec) -> None:
+        """Build the estimator and output filters for ``spec`` and clear their state."""
+        super().reset(spec)
+        if not hasattr(self, "friction_"):
+            self.friction_ = dict(coulomb=0.0, static=0.0, speed=1.0, viscous=0.0, offset=0.0,
+                                  scale=1.0, load=0.0)
+        self.motion_ = motion_filter(spec.fs, self.velocity_cutoff, self.accel_cutoff)
+        self.output_ = biquad_ss(*signal.butter(2, self.cutoff, fs=spec.fs))
+        self.lifted_ = {}
+        self.rad_per_count_ = 2.0 * np.pi / spec.counts_per_rev
+        self.x_motion_ = np.zeros(self.motion_[0].shape[0])
+        self.x_out_ = None               # output low-pass state, set on the first sample
+        self.last_count_ = None
+
+    def step(self, block: SensorBlock) -> np.ndarray:
+        """Friction-compensated current torque of ``block``, low-passed."""
+        counts = np.asarray(block.encoder)
+        if self.last_count_ is None and len(counts):
+            self.last_count_ = int(counts[0])
+        m = len(counts)
+        if m == 0:
+            return np.zeros(0)
+        rate = np.diff(counts, prepend=self.last_count_) * (self.rad_per_count_ * self.spec_.fs)
+        self.last_count_ = int(counts[-1])
+        motion, out = self._lifted(m)
+        va = motion[0] @ np.concatenate([self.x_motion_, rate])
+        self.x_motion_ = motion[1] @ np.concatenate([self.x_motion_, rate])
+        tau = self._torque(np.asarray(block.current, dtype=float), va[:m], va[m:])
+        if self.x_out_ is None:
+            self.x_out_ = steady_state(self.output_[0], self.output_[1], tau[0])
+        z = np.concatenate([self.x_out_, tau])
+        self.x_out_ = out[1] @ z
+        return out[0] @ z
+
+    def _torque(self, current: np.ndarray, w: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """Joint torque per sample from current, velocity and acceleration."""
+        spec, f = self.spec_, self.friction_
+        s = soft_sign(w, self.sign_width)
+        motor = (spec.torque_constant * current - spec.rotor_inertia * a
+                 - stribeck(w, f["coulomb"], f["static"], f["speed"], f["viscous"], sign=s)
+                 - f["offset"])
+        # the load-dependent friction adds to the motor torque when the motor drives the
+        # load (sgn tau = sgn w) and subtracts when the load back-drives the motor
+        return spec.gear_ratio * motor / (f["scale"] + f["load"] * s * np.sign(motor))
+
+    def _lifted(self, m: int):
+        """``([O T], [Am R])`` of the motion estimator and of the output low-pass."""
+        if m not in self.lifted_:
+            mats = []
+            for system in (self.motion_, self.output_):
+                O, T, Am, R = lift(*system, m)
+                mats.append((np.hstack([O, T]), np.hstack([Am, R])))
+            self.lifted_[m] = tuple(mats)
+        return self.lifted_[m]

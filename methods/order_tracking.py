@@ -26,13 +26,16 @@ See ``docs/methods/order-tracking.md`` for every parameter and how it was chosen
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import iirnotch, lfilter, lfilter_zi
+from scipy.signal import iirnotch, lfilter
 
-from rippleb.dsp import fit_gain_offset
+from rippleb.dsp import biquad_ss, fit_gain_offset, lift, series_ss
 from rippleb.method import Method
 
 # Absolute sample index meaning "no crossing yet": far enough back to count as a stop.
 _NEVER = -(1 << 62)
+# Order samples up to which one tick is filtered by two small matrix products (lifted
+# state space) instead of one lfilter call per section; longer runs use lfilter.
+_LIFT = 128
 
 
 def design_notches(orders, q: float, counts_per_rev: int) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -67,11 +70,6 @@ def cascade(sections, x: np.ndarray, zi: np.ndarray) -> tuple[np.ndarray, np.nda
     return x, zf
 
 
-def steady_state(sections, level: float) -> np.ndarray:
-    """Cascade state after the constant input ``level`` for ever (DC gain of a notch is 1)."""
-    return np.array([lfilter_zi(b, a) for b, a in sections]) * level
-
-
 def crossings(encoder: np.ndarray, strain: np.ndarray, prev_encoder: int, prev_strain: float):
     """Encoder position crossings between consecutive DAQ samples, with the strain there.
 
@@ -100,9 +98,13 @@ def crossings(encoder: np.ndarray, strain: np.ndarray, prev_encoder: int, prev_s
     value
         Interpolated strain at the crossing.
     """
-    e = np.concatenate(([prev_encoder], encoder))
-    s = np.concatenate(([prev_strain], strain))
-    de = np.diff(e)
+    e = np.concatenate(([prev_encoder], encoder)).astype(np.int64)
+    s = np.concatenate(([prev_strain], strain)).astype(float)
+    return _crossings(e, s, np.diff(e))
+
+
+def _crossings(e, s, de):
+    """:func:`crossings` on the arrays extended by the previous sample, ``de = diff(e)``."""
     m = np.abs(de)
     sample = np.repeat(np.arange(len(de)), m)
     j = np.arange(len(sample)) - np.repeat(np.cumsum(m) - m, m)
@@ -125,9 +127,9 @@ class OrderTracking(Method):
         Ripple orders removed in the angle domain; the paper's Sec. III-A: 2, 4, 8.
     stop_after_s
         Time without any position crossing after which the joint counts as stopped [s]:
-        the dead-zone switch and the moment the back-propagation table freezes. The
-        paper's FPGA uses a trigger timeout (Sec. IV-A); here it is chosen on the
-        ``calibration`` scenario.
+        the dead-zone switch, and the restart that triggers back propagation at the next
+        crossing. The paper's FPGA uses a trigger timeout (Sec. IV-A); here it is chosen
+        on the ``calibration`` scenario.
     dead_zone
         Switch to the offset-compensated raw strain during stops.
     back_propagation
@@ -137,7 +139,7 @@ class OrderTracking(Method):
 
     name = "order-tracking"
 
-    def __init__(self, q: float = 10.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.005,
+    def __init__(self, q: float = 15.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.0005,
                  dead_zone: bool = True, back_propagation: bool = True):
         self.q = q
         self.orders = orders
@@ -164,10 +166,11 @@ class OrderTracking(Method):
         n = int(spec.counts_per_rev)
         self.sections_ = design_notches(self.orders, self.q, n)
         self.stop_samples_ = max(1, int(round(self.stop_after_s * spec.fs)))
-        self.periodic_solver_ = self._periodic_solver(n)
-        self.zi_ = np.zeros((len(self.sections_), 2))
+        self._design_state_space(n)
+        self.zi_ = np.zeros(2 * len(self.sections_))
         self.table_ = np.zeros(n)            # ripple removed at each position (one revolution)
         self.seen_ = np.zeros(n, dtype=bool)
+        self.full_ = False                   # every position of the revolution seen
         self.prev_encoder_ = None
         self.prev_strain_ = 0.0
         self.samples_ = 0                    # absolute index of the next sample
@@ -185,63 +188,118 @@ class OrderTracking(Method):
     def filter_strain(self, block) -> np.ndarray:
         """The ripple-free strain [V] per sample of ``block`` (before gain and offset)."""
         strain = np.asarray(block.strain, dtype=float)
-        encoder = np.asarray(block.encoder, dtype=np.int64)
         n = len(strain)
         if n == 0:
             return np.empty(0)
         if self.prev_encoder_ is None:
-            self.prev_encoder_, self.prev_strain_ = int(encoder[0]), float(strain[0])
-        here = self.samples_ + np.arange(n)
-        if encoder[-1] == self.prev_encoder_ and not np.any(np.diff(encoder)):
-            out = self._hold(strain, here, np.full(n, self.last_cross_), None, None, None)
-        else:
-            out = self._track(strain, encoder, here)
-        self.prev_encoder_, self.prev_strain_ = int(encoder[-1]), float(strain[-1])
+            self.prev_encoder_, self.prev_strain_ = int(block.encoder[0]), float(strain[0])
+        e = np.empty(n + 1, dtype=np.int64)
+        e[0] = self.prev_encoder_
+        e[1:] = block.encoder
+        de = e[1:] - e[:-1]
+        moved = np.flatnonzero(de)
+        out = self._track(strain, e, de, moved) if len(moved) else self._hold(strain)
+        self.prev_encoder_, self.prev_strain_ = int(e[-1]), float(strain[-1])
         self.samples_ += n
         return out
 
-    def _track(self, strain, encoder, here):
-        """The general path: re-sample, filter, hold, switch."""
-        sample, label, direction, x = crossings(encoder, strain, self.prev_encoder_, self.prev_strain_)
-        first = np.flatnonzero(np.diff(sample, prepend=-1))      # first crossing of each sample
-        moved = here[sample[first]]
-        gaps = np.diff(moved, prepend=self.last_cross_)
-        restarts = first[gaps - 1 >= self.stop_samples_]
-        y = self._filter(x, label, direction, restarts)
-        last_cross = np.full(len(strain), self.last_cross_)
-        last_cross[sample[first]] = moved
-        last_cross = np.maximum.accumulate(last_cross)
-        count = np.searchsorted(sample, np.arange(len(strain)), side="right")  # crossings so far
-        out = self._hold(strain, here, last_cross, y, x, count)
-        self.last_cross_ = int(moved[-1])
+    def _hold(self, strain):
+        """A block without crossings: hold the last filtered value, or the dead-zone output."""
+        n = len(strain)
+        out = np.empty(n)
+        stop = 0 if self.last_cross_ == _NEVER else (
+            self.last_cross_ + self.stop_samples_ - self.samples_ if self.dead_zone else n)
+        stop = min(max(stop, 0), n)
+        out[:stop] = self.y_last_
+        out[stop:] = strain[stop:] + self.offset_last_
+        return out
+
+    def _track(self, strain, e, de, moved):
+        """A block with crossings: re-sample, filter, hold, switch."""
+        s = np.empty(len(strain) + 1)
+        s[0] = self.prev_strain_
+        s[1:] = strain
+        steps = de[moved]
+        if steps.max() <= 1 and steps.min() >= -1:
+            # One crossing per moving sample (below fs counts/s): the same formulas as
+            # crossings() with m = 1, without its bookkeeping.
+            first = np.arange(len(moved))
+            sample, direction = moved, steps
+            label = e[moved] + (steps > 0)
+            x = s[moved] + 0.5 * (s[moved + 1] - s[moved])
+        else:
+            sample, label, direction, x = _crossings(e, s, de)
+            m = np.abs(steps)
+            first = np.cumsum(m) - m
+        when = self.samples_ + moved
+        gaps = when - np.concatenate(([self.last_cross_], when[:-1]))
+        y = self._filter(x, label, direction, first[gaps - 1 >= self.stop_samples_])
+        out = self._output(strain, de, moved, x, y)
+        self.last_cross_ = int(when[-1])
         self.y_last_, self.offset_last_ = float(y[-1]), float(y[-1] - x[-1])
         return out
 
-    def _hold(self, strain, here, last_cross, y, x, count):
+    def _output(self, strain, de, moved, x, y):
         """Latest filtered value per DAQ sample, or raw plus the stop offset in the dead zone."""
-        if y is None:
-            held = np.full(len(strain), self.y_last_)
-            offset = self.offset_last_
-        else:
-            held = np.concatenate(([self.y_last_], y))[count]
-            offset = np.concatenate(([self.offset_last_], y - x))[count]
-        never = last_cross == _NEVER
-        stopped = (here - last_cross >= self.stop_samples_) if self.dead_zone else never
-        # Before the first crossing there is no filtered value: the raw strain is all we have.
-        return np.where(stopped, strain + np.where(never, 0.0, offset), held)
+        crossed = np.cumsum(np.abs(de))          # crossings up to and including each sample
+        held = np.concatenate(([self.y_last_], y))[crossed]
+        first_ever = self.last_cross_ == _NEVER
+        if not self.dead_zone:
+            if first_ever:   # no filtered value yet: the raw strain is all there is
+                held[:moved[0]] = strain[:moved[0]]
+            return held
+        since = np.arange(len(strain)) - np.concatenate(
+            ([self.last_cross_ - self.samples_], moved))[np.cumsum(de != 0)]
+        offset = np.concatenate(([0.0 if first_ever else self.offset_last_], y - x))[crossed]
+        return np.where(since >= self.stop_samples_, strain + offset, held)
 
     def _filter(self, x, label, direction, restarts):
         """Notch the order samples ``x``, rebuilding the state at each restart index."""
+        if len(restarts) == 0:   # the usual tick: one run, no restart
+            y, self.zi_ = self._run(x, self.zi_)
+            self._remember(label, x - y, direction)
+            return y
         y = np.empty_like(x)
         start = 0
         for r in list(restarts) + [len(x)]:
             if r > start:
-                y[start:r], self.zi_ = cascade(self.sections_, x[start:r], self.zi_)
+                y[start:r], self.zi_ = self._run(x[start:r], self.zi_)
                 self._remember(label[start:r], x[start:r] - y[start:r], direction[start:r])
             if r < len(x):
                 self.zi_ = self._restart_state(x[r], int(label[r]), int(direction[r]))
             start = r
         return y
+
+    def _run(self, x, state):
+        """Filter ``x`` from ``state``: lifted matrices for a tick, ``lfilter`` for long runs."""
+        m = len(x)
+        if m <= _LIFT:
+            return (self.lift_O_[:m] @ state + self.lift_T_[:m, :m] @ x,
+                    self.lift_A_[m] @ state + self.lift_R_[:, _LIFT - m:] @ x)
+        y, zf = cascade(self.sections_, x, state.reshape(-1, 2))
+        return y, zf.ravel()
+
+    def _design_state_space(self, n):
+        """State-space forms of the notch cascade: per tick (lifted), and over one revolution.
+
+        The state is the transposed-direct-form-II state of each section in turn, exactly
+        ``lfilter``'s ``zi``, so both paths share it.
+        """
+        A, B, C, D = series_ss(*(biquad_ss(b, a) for b, a in self.sections_))
+        O, T, _, R = lift(A, B, C, D, _LIFT)
+        powers = [np.eye(len(B))]
+        for _ in range(_LIFT):
+            powers.append(A @ powers[-1])
+        self.lift_O_, self.lift_T_, self.lift_A_, self.lift_R_ = O, T, np.array(powers), R
+        self.unit_state_ = np.linalg.solve(np.eye(len(B)) - A, B)   # steady state, input 1
+        # Periodic steady state over one revolution: s = (I - A^n)^-1 sum_k A^(n-1-k) B h_k.
+        reach = np.empty((len(B), n))
+        column = B.copy()
+        for k in range(n - 1, -1, -1):
+            reach[:, k] = column
+            column = A @ column
+        self.periodic_ = np.linalg.solve(np.eye(len(B)) - np.linalg.matrix_power(A, n), reach)
+        self.periodic_reversed_ = np.ascontiguousarray(self.periodic_[:, ::-1])
 
     # -- back propagation ---------------------------------------------------------------
 
@@ -255,15 +313,17 @@ class OrderTracking(Method):
             pos, last = np.unique(pos[::-1], return_index=True)
             ripple = ripple[::-1][last]
         self.table_[pos] = ripple
-        self.seen_[pos] = True
+        if not self.full_:
+            self.seen_[pos] = True
+            self.full_ = bool(self.seen_.all())
 
     def _restart_state(self, x_new, label, direction):
         """Filter state for the first order sample after a stop."""
-        if not (self.back_propagation and self.seen_.all()):
-            return steady_state(self.sections_, x_new)
-        return self._periodic_state(self._history(x_new, label, direction))
+        if not (self.back_propagation and self.full_):
+            return self.unit_state_ * x_new
+        return self._periodic_state(x_new, label, direction)
 
-    def _history(self, x_new, label, direction):
+    def history(self, x_new, label, direction) -> np.ndarray:
         """The saved revolution, ordered to lead up to the new crossing, at today's level.
 
         Positions ``label - direction * N .. label - direction``: the revolution behind the
@@ -276,27 +336,22 @@ class OrderTracking(Method):
         ripple = self.table_[(label - direction * np.arange(n, 0, -1)) % n]
         return ripple + (x_new - self.table_[label % n])
 
-    def _periodic_solver(self, n):
-        """Matrix ``(I - Phi)^-1`` where ``Phi`` maps the cascade state over ``n`` zero inputs."""
-        size = 2 * len(self.sections_)
-        phi = np.empty((size, size))
-        zeros = np.zeros(n)
-        for k in range(size):
-            unit = np.zeros(size)
-            unit[k] = 1.0
-            _, zf = cascade(self.sections_, zeros, unit.reshape(-1, 2))
-            phi[:, k] = zf.ravel()
-        return np.linalg.inv(np.eye(size) - phi)
-
-    def _periodic_state(self, history):
-        """State after running the filter over ``history`` repeated for ever.
+    def _periodic_state(self, x_new, label, direction):
+        """State after running the filter over :meth:`history` repeated for ever.
 
         The ripple is periodic over one revolution, so this is the filter having seen the
-        saved revolution infinitely often: ``s = Phi s + g`` with ``g`` the state reached
-        from rest over one pass, solved in closed form.
+        saved revolution infinitely often, in closed form: ``periodic_ @ history``, with the
+        rotation of the table to the restart position done by splitting the product instead
+        of building the history.
         """
-        _, g = cascade(self.sections_, history, np.zeros_like(self.zi_))
-        return (self.periodic_solver_ @ g.ravel()).reshape(self.zi_.shape)
+        n, t, L = len(self.table_), self.table_, label % len(self.table_)
+        if direction > 0:
+            g = self.periodic_
+            state = g[:, :n - L] @ t[L:] + g[:, n - L:] @ t[:L]
+        else:
+            g = self.periodic_reversed_
+            state = g[:, n - 1 - L:] @ t[:L + 1] + g[:, :n - 1 - L] @ t[L + 1:]
+        return state + self.unit_state_ * (x_new - t[L])
 
 
 class OrderTrackingNoDeadzone(OrderTracking):
@@ -304,7 +359,7 @@ class OrderTrackingNoDeadzone(OrderTracking):
 
     name = "order-tracking-no-deadzone"
 
-    def __init__(self, q: float = 10.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.005,
+    def __init__(self, q: float = 15.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.0005,
                  dead_zone: bool = False, back_propagation: bool = True):
         super().__init__(q=q, orders=orders, stop_after_s=stop_after_s, dead_zone=dead_zone,
                          back_propagation=back_propagation)
@@ -315,7 +370,7 @@ class OrderTrackingNoBackprop(OrderTracking):
 
     name = "order-tracking-no-backprop"
 
-    def __init__(self, q: float = 10.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.005,
+    def __init__(self, q: float = 15.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.0005,
                  dead_zone: bool = True, back_propagation: bool = False):
         super().__init__(q=q, orders=orders, stop_after_s=stop_after_s, dead_zone=dead_zone,
                          back_propagation=back_propagation)

@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from copy import deepcopy
 
 import numpy as np
 
 from rippleb.data import SensorLog, make_log
-from rippleb.streaming import InvalidOutput, run_method
+from rippleb.streaming import InvalidOutput, prepare_blocks, stream
 
 BLOCK_SIZES = (1, 7, 20, 1000)
 WINDOW_S = (0.6, 1.2)  # of stop-restart seed 0: the end of a move, a 50 ms stop, a restart
@@ -58,11 +59,12 @@ def check_method(cls, *, log: SensorLog | None = None, calibration: SensorLog | 
         log = default_log if log is None else log
         calibration = default_cal if calibration is None else calibration
     name = f"{cls.__name__}({', '.join(f'{k}={v!r}' for k, v in params.items())})"
-    base = _estimate(cls, params, calibration, log, None, name)
-    _check_determinism(cls, params, calibration, log, base, atol, name)
-    _check_causality(cls, params, calibration, log, base, atol, name)
+    fitted = _fit(cls, params, calibration)
+    base = _estimate(fitted, log, None, name)
+    _check_determinism(cls, params, calibration, fitted, log, base, atol, name)
+    _check_causality(fitted, log, base, atol, name)
     for size in block_sizes:
-        other = _estimate(cls, params, calibration, log, size, name)
+        other = _estimate(fitted, log, size, name)
         _assert_close(other, base, atol, f"{name}: blocks of {size} samples differ from blocks of "
                                          f"{log.spec.block_size}")
 
@@ -84,26 +86,35 @@ def slice_log(log: SensorLog, start: int, stop: int) -> SensorLog:
     return make_log(log.spec, columns, source="slice", meta=dict(log.meta))
 
 
-def _estimate(cls, params, calibration, log, block_size, name, method=None) -> np.ndarray:
-    method = cls(**params) if method is None else method
+def _fit(cls, params, calibration):
+    method = cls(**params)
+    method.fit(calibration.for_method(keep_ref=True))
+    return method
+
+
+def _estimate(fitted, log, block_size, name, copy=True) -> np.ndarray:
+    # A deep copy of the fitted method per run: one fit serves every check.
+    method = deepcopy(fitted) if copy else fitted
+    visible = log.for_method(keep_ref=False)
+    method.reset(visible.spec)
     try:
-        estimate, _ = run_method(method, calibration, log, block_size)
+        estimate, _ = stream(method.step, prepare_blocks(visible, block_size), len(visible))
     except InvalidOutput as exc:
         raise AssertionError(f"{name}: {exc}" + (f" (blocks of {block_size})" if block_size else "")) from None
     return estimate
 
 
-def _check_determinism(cls, params, calibration, log, base, atol, name) -> None:
-    again = _estimate(cls, params, calibration, log, None, name)
+def _check_determinism(cls, params, calibration, fitted, log, base, atol, name) -> None:
+    again = _estimate(_fit(cls, params, calibration), log, None, name)
     _assert_close(again, base, atol, f"{name}: two fresh instances give different estimates")
-    method = cls(**params)
-    _estimate(cls, params, calibration, log, None, name, method)
-    rerun = _estimate(cls, params, calibration, log, None, name, method)
+    method = deepcopy(fitted)
+    _estimate(method, log, None, name, copy=False)
+    rerun = _estimate(method, log, None, name, copy=False)
     _assert_close(rerun, base, atol, f"{name}: a second run after reset differs from the first "
                                      "(reset must clear all streaming state)")
 
 
-def _check_causality(cls, params, calibration, log, base, atol, name) -> None:
+def _check_causality(fitted, log, base, atol, name) -> None:
     size = log.spec.block_size
     k = (len(log) // 2) // size * size
     rng = np.random.default_rng(0)
@@ -113,7 +124,7 @@ def _check_causality(cls, params, calibration, log, base, atol, name) -> None:
     columns["current"][k:] += rng.normal(0, np.std(log.current) + 1e-3, tail)
     columns["encoder"][k:] += np.cumsum(rng.integers(-3, 4, tail))
     changed = dataclasses.replace(log, **columns)
-    other = _estimate(cls, params, calibration, changed, None, name)
+    other = _estimate(fitted, changed, None, name)
     _assert_close(other[:k], base[:k], atol, f"{name}: not causal: changing samples from {k} on "
                                              f"changed the estimate before sample {k}")
 

@@ -24,6 +24,8 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``rippleb`` script; returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    # The exact command line, recorded by `run` in DIR/provenance.json and by `report`.
+    args.argv = list(sys.argv[1:] if argv is None else argv)
     try:
         return args.func(args) or 0
     except RipplebError as exc:
@@ -105,11 +107,16 @@ def _add_simulate(sub) -> None:
 
 
 def _add_report(sub) -> None:
-    p = sub.add_parser("report", help="summarise a run's results.csv as Markdown",
-                       description="Print a Markdown summary of DIR/results.csv and write it to "
-                                   "DIR/summary.md (and to OUT/ with the raw rows if --out is given).")
+    p = sub.add_parser("report", help="write the published comparison of a run (tables, figures, provenance)",
+                       description="From DIR/results.csv write OUT/README.md (method x scenario matrix "
+                                   "with 95%% confidence intervals over seeds, ranking, the paper's "
+                                   "Table I replica, failed rows, provenance), OUT/results.csv, "
+                                   "OUT/provenance.json and OUT/figures/*.png. See docs/report.md.")
     p.add_argument("dir", type=Path, metavar="DIR")
-    p.add_argument("--out", type=Path, help="also publish summary.md and results.csv here")
+    p.add_argument("--out", type=Path, help="output directory (default DIR/report/; the published one is results/)")
+    p.add_argument("--no-figures", action="store_true", help="tables and provenance only")
+    p.add_argument("--figure-seed", type=int, default=0,
+                   help="device seed re-simulated for the signal figures (default 0)")
     p.set_defaults(func=cmd_report)
 
 
@@ -140,9 +147,48 @@ def cmd_list(args) -> int:
 
 def cmd_run(args) -> int:
     """``rippleb run``."""
-    from rippleb import runner
+    from rippleb.report import collect_provenance
 
     start = time.perf_counter()
+    provenance = collect_provenance(args.argv)
+    completed = False
+    try:
+        status = _run(args, start)
+        completed = True
+        return status
+    finally:
+        provenance["completed"] = completed
+        _record_run(args, provenance, time.perf_counter() - start)
+
+
+def _record_run(args, provenance: dict, wall_s: float) -> None:
+    """Write DIR/provenance.json (command, code version, software, wall time) for
+    ``rippleb report``; a resumed run keeps the first command and adds its own."""
+    import json
+
+    out_dir = getattr(args, "out_dir", None)
+    if out_dir is None or not (out_dir / "run.json").is_file():
+        return  # the run never started (bad arguments): nothing to describe
+    path = out_dir / "provenance.json"
+    provenance.update(jobs=args.jobs, wall_s=wall_s, finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
+    if args.resume is not None and path.is_file():
+        try:
+            first = json.loads(path.read_text())
+        except (OSError, ValueError):
+            first = {}
+        first.setdefault("resumes", []).append(provenance["command"])
+        first["wall_s"] = first.get("wall_s", 0.0) + wall_s
+        first["completed"] = provenance["completed"]
+        provenance = first
+    try:
+        path.write_text(json.dumps(provenance, indent=1) + "\n")
+    except OSError as exc:
+        print(f"rippleb: warning: cannot record {path}: {exc.strerror or exc}", file=sys.stderr)
+
+
+def _run(args, start: float) -> int:
+    from rippleb import runner
+
     timeout = args.timeout or None
     memory = args.memory_limit or None
     progress = False if args.no_progress else None
@@ -196,5 +242,11 @@ def cmd_report(args) -> int:
     """``rippleb report``."""
     from rippleb.report import report
 
-    print(report(args.dir, args.out))
+    written = report(args.dir, args.out, figures=not args.no_figures, figure_seed=args.figure_seed,
+                     argv=args.argv)
+    for warning in written["warnings"]:
+        print(f"rippleb: warning: {warning}", file=sys.stderr)
+    print(f"wrote {written['readme']}, {written['csv']}, {written['provenance']}"
+          + (f" and {len(written['figures'])} figures in {written['readme'].parent / 'figures'}"
+             if written["figures"] else ""))
     return 0

@@ -123,3 +123,375 @@ def plot_order_spectra(out_png: str | Path, seed: int = 0,
     fig.savefig(out, dpi=120)
     plt.close(fig)
     return out
+
+
+# --------------------------------------------------------------------------- report figures
+#
+# The figures below show signals of one device (``seed``), re-simulated and streamed through
+# the runner's own loop (:mod:`rippleb.streaming`, methods from the registry), or summarise
+# the result rows. ``draw_all`` makes every figure the run's methods and scenarios allow.
+
+#: One colour and line style per built-in method, the same in every figure.
+METHOD_STYLE = {
+    "raw": ("tab:blue", "-"), "lowpass": ("tab:cyan", "-"), "current-based": ("m", "--"),
+    "order-tracking": ("tab:red", "-"), "order-tracking-no-deadzone": ("tab:orange", "-."),
+    "order-tracking-no-backprop": ("tab:brown", ":"), "switched-notch": ("tab:green", "-"),
+    "kalman-ripple": ("tab:purple", "-"),
+}
+#: Scenarios whose signals the figures need: Table I/Fig. 5/6, speed coverage, restarts.
+SIGNAL_SCENARIOS = ("paper-quintic", "speed-sweep", "stop-restart")
+_OTHER_COLORS = ("tab:olive", "tab:gray", "tab:pink", "k")
+
+
+def style(method: str, index: int = 0) -> dict:
+    """matplotlib keyword arguments of ``method``'s line."""
+    color, ls = METHOD_STYLE.get(method, (_OTHER_COLORS[index % len(_OTHER_COLORS)], "-"))
+    return {"color": color, "ls": ls, "label": method}
+
+
+@dataclass
+class ScenarioSignals:
+    """One re-simulated scenario and each method's causal estimate on it.
+
+    ``sim`` is the :class:`~rippleb.simulator.Simulation`; ``estimates`` maps a method to its
+    estimate [Nm] per sample; ``errors`` a method that failed to the reason.
+    """
+
+    sim: object
+    estimates: dict
+    errors: dict
+
+
+def fit_methods(methods, seed: int) -> tuple[dict, dict]:
+    """Instantiate and ``fit`` each method on the calibration log of ``seed``, once.
+
+    Returns ``(fitted, errors)``: method name to fitted instance, and to a one-line error.
+    """
+    from rippleb.registry import Registry, one_line
+    from rippleb.simulator import simulate
+
+    registry = Registry.discover()
+    calibration = simulate("calibration", seed).log.for_method(keep_ref=True)
+    fitted, errors = {}, {}
+    for name in methods:
+        try:
+            method = registry.get(name).load()()
+            method.fit(calibration)
+        except Exception as exc:  # a failing method costs its curves, not the report
+            errors[name] = one_line(exc)
+        else:
+            fitted[name] = method
+    return fitted, errors
+
+
+def stream_methods(fitted: dict, scenario: str, seed: int) -> ScenarioSignals:
+    """Simulate ``scenario`` on ``seed`` and stream it through each fitted method.
+
+    Each method is ``reset`` before its run (the Method contract), then fed blocks exactly
+    as the runner does (:func:`rippleb.streaming.prepare_blocks`, :func:`~rippleb.streaming.stream`).
+    """
+    from rippleb.registry import one_line
+    from rippleb.simulator import simulate
+    from rippleb.streaming import prepare_blocks, stream
+
+    sim = simulate(scenario, seed)
+    visible = sim.log.for_method(keep_ref=False)
+    estimates, errors = {}, {}
+    for name, method in fitted.items():
+        try:
+            method.reset(visible.spec)
+            estimates[name], _ = stream(method.step, prepare_blocks(visible), len(visible))
+        except Exception as exc:
+            errors[name] = one_line(exc)
+    return ScenarioSignals(sim, estimates, errors)
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, out_png) -> Path:
+    out = Path(out_png)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    fig.clf()
+    _pyplot().close(fig)
+    return out
+
+
+def _motion_edges(ax, sig: ScenarioSignals) -> None:
+    """Dashed verticals where the joint starts and stops (as in the paper's Figs. 4-6)."""
+    t, moving = sig.sim.log.t, np.asarray(sig.sim.moving, bool)
+    for i in np.flatnonzero(np.diff(moving.astype(int))) + 1:
+        ax.axvline(t[i], color="k", lw=0.7, ls="--", alpha=0.6)
+
+
+def plot_ripple_compensation(sig: ScenarioSignals, out_png, seed: int = 0) -> Path:
+    """Replica of the paper's Fig. 5: the raw strain torque against the order-tracking
+    filtered torque on ``paper-quintic`` (top), and their error against the true torque
+    (bottom), which is the ripple and offset the filter removes."""
+    plt = _pyplot()
+    log = sig.sim.log
+    fig, (ax, ax_e) = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True,
+                                   gridspec_kw={"height_ratios": [3, 2]})
+    ax.plot(log.t, log.torque_true, color="k", lw=1.0, label="torque_true (flexspline)")
+    for i, name in enumerate(m for m in ("raw", "order-tracking") if m in sig.estimates):
+        kw = style(name, i)
+        kw["label"] = {"raw": "raw strain x gain", "order-tracking": "order-tracking filtered"}[name]
+        ax.plot(log.t, sig.estimates[name], lw=0.8, **{**kw, "ls": "-"})
+        ax_e.plot(log.t, sig.estimates[name] - log.torque_true, lw=0.8, **{**kw, "ls": "-"})
+    for a in (ax, ax_e):
+        _motion_edges(a, sig)
+        a.grid(alpha=0.3)
+    ax.set(ylabel="joint torque [Nm]",
+           title=f"Ripple and offset compensation on paper-quintic, device seed {seed} "
+                 "(replica of Jung et al. 2017, Fig. 5)")
+    ax_e.set(xlabel="time [s]", ylabel="estimate - torque_true [Nm]")
+    ax.legend(loc="best", fontsize=8)
+    ax_e.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    return _save(fig, out_png)
+
+
+def plot_estimates(sig: ScenarioSignals, out_png, seed: int = 0) -> Path:
+    """Replica of the paper's Fig. 6: each method's estimate against the model reference
+    ``torque_ref`` (eq. 7) on ``paper-quintic``, one panel per method; the first panel
+    is the paper's own pair, current-based and order tracking."""
+    plt = _pyplot()
+    from rippleb.report import method_order
+
+    log = sig.sim.log
+    names = method_order(sig.estimates)
+    panels = [[m for m in ("current-based", "order-tracking") if m in sig.estimates]]
+    panels = [p for p in panels if p] + [[m] for m in names if m not in panels[0]]
+    ncols = 2
+    nrows = int(np.ceil(len(panels) / ncols))
+    fig, axes = plt.subplots(nrows, ncols, figsize=(11, 2.4 * nrows + 0.8), sharex=True, sharey=True,
+                             squeeze=False)
+    mask = np.asarray(sig.sim.eval_mask, bool)
+    for ax, panel in zip(axes.flat, panels):
+        ax.plot(log.t, log.torque_ref, color="k", lw=2.2, ls="--", label="torque_ref (model, eq. 7)")
+        for name in panel:
+            est = sig.estimates[name]
+            rms = float(np.sqrt(np.mean((est[mask] - log.torque_ref[mask]) ** 2)))
+            ax.plot(log.t, est, lw=0.9, **{**style(name, names.index(name)),
+                                          "label": f"{name} (RMS vs ref {rms:.2g} Nm)"})
+        _motion_edges(ax, sig)
+        ax.legend(loc="upper right", fontsize=7)
+        ax.grid(alpha=0.3)
+    for ax in axes.flat[len(panels):]:
+        ax.set_visible(False)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("torque [Nm]")
+    for ax in axes[-1, :]:
+        ax.set_xlabel("time [s]")
+    fig.suptitle(f"Estimates against the model reference on paper-quintic, device seed {seed} "
+                 "(replica of Jung et al. 2017, Fig. 6)", fontsize=10)
+    fig.tight_layout()
+    return _save(fig, out_png)
+
+
+def error_by_speed(signals, n_bins: int = 12) -> dict:
+    """RMS error against ``torque_true`` per bin of joint speed, pooled over scenarios.
+
+    Samples inside each scenario's evaluation window; bin 0 holds the samples at rest
+    (commanded speed zero), the others equal widths of ``|joint speed|`` up to its maximum.
+    Returns ``{"speed": bin centres [rad/s], method: RMS per bin [Nm] (NaN if empty)}``.
+    """
+    speeds, mask_all = [], []
+    for sig in signals:
+        speeds.append(np.abs(sig.sim.joint_velocity))
+        mask_all.append(np.asarray(sig.sim.eval_mask, bool))
+    speed = np.concatenate(speeds)
+    inside = np.concatenate(mask_all)
+    moving = np.concatenate([np.asarray(s.sim.moving, bool) for s in signals])
+    edges = np.linspace(0.0, speed[inside & moving].max() if (inside & moving).any() else 1.0, n_bins + 1)
+    which = np.where(moving, np.clip(np.digitize(speed, edges[1:-1]) + 1, 1, n_bins), 0)
+    out = {"speed": np.concatenate([[0.0], 0.5 * (edges[:-1] + edges[1:])])}
+    methods = set.intersection(*(set(s.estimates) for s in signals)) if signals else set()
+    for name in methods:
+        err = np.concatenate([s.estimates[name] - s.sim.log.torque_true for s in signals])
+        rms = np.full(n_bins + 1, np.nan)
+        for b in range(n_bins + 1):
+            sel = inside & (which == b)
+            if sel.any():
+                rms[b] = np.sqrt(np.mean(err[sel] ** 2))
+        out[name] = rms
+    return out
+
+
+def plot_error_vs_speed(signals, out_png, seed: int = 0) -> Path:
+    """RMS error against joint speed per method (:func:`error_by_speed`), log scale."""
+    from rippleb.report import method_order
+
+    plt = _pyplot()
+    table = error_by_speed(signals)
+    fig, ax = plt.subplots(figsize=(9, 5.5))
+    names = method_order(k for k in table if k != "speed")
+    for i, name in enumerate(names):
+        ax.plot(table["speed"], table[name], marker="o", ms=3.5, lw=1.2, **style(name, i))
+    ax.set_yscale("log")
+    scen = ", ".join(s.sim.log.meta.get("scenario", "?") for s in signals)
+    ax.set(xlabel="|joint speed| [rad/s] (0: at rest)", ylabel="RMS error against torque_true [Nm]",
+           title=f"Error against joint speed, pooled over {scen}; device seed {seed}")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, ncols=2)
+    fig.tight_layout()
+    return _save(fig, out_png)
+
+
+def longest_rest_restart(sig: ScenarioSignals) -> int | None:
+    """Index of the restart (rest to motion, inside the window) after the longest rest."""
+    moving = np.asarray(sig.sim.moving, bool)
+    starts = np.flatnonzero(moving[1:] & ~moving[:-1]) + 1
+    starts = starts[np.asarray(sig.sim.eval_mask, bool)[starts]]
+    if len(starts) == 0:
+        return None
+    stops = np.flatnonzero(moving[:-1] & ~moving[1:]) + 1
+    rest = [i - (stops[stops < i].max() if (stops < i).any() else 0) for i in starts]
+    return int(starts[int(np.argmax(rest))])
+
+
+def plot_restart_zoom(sig: ScenarioSignals, out_png, seed: int = 0,
+                      before_s: float = 0.15, after_s: float = 0.35) -> Path | None:
+    """Zoom on the restart after the longest rest of ``stop-restart``: estimates (top) and
+    their error (bottom); this is where the dead zone and back propagation act."""
+    from rippleb.report import method_order
+
+    i = longest_rest_restart(sig)
+    if i is None:
+        return None
+    plt = _pyplot()
+    log = sig.sim.log
+    t0 = log.t[i]
+    sel = (log.t >= t0 - before_s) & (log.t <= t0 + after_s)
+    fig, (ax, ax_e) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
+    ax.plot(log.t[sel], log.torque_true[sel], color="k", lw=2.0, label="torque_true")
+    names = method_order(sig.estimates)
+    for k, name in enumerate(names):
+        est = sig.estimates[name][sel]
+        ax.plot(log.t[sel], est, lw=1.0, **style(name, k))
+        ax_e.plot(log.t[sel], est - log.torque_true[sel], lw=1.0, **style(name, k))
+    for a in (ax, ax_e):
+        a.axvline(t0, color="k", ls="--", lw=0.8)
+        a.grid(alpha=0.3)
+    ax.set(ylabel="torque [Nm]", title=f"Restart after the longest rest of stop-restart (at {t0:.3f} s, "
+                                      f"dashed), device seed {seed}")
+    ax_e.set(xlabel="time [s]", ylabel="estimate - torque_true [Nm]")
+    ax.legend(fontsize=7, ncols=3, loc="best")
+    fig.tight_layout()
+    return _save(fig, out_png)
+
+
+def plot_accuracy_vs_cost(frame, out_png) -> Path:
+    """Accuracy against per-tick cost, from the rows: per method, ``rms_error_nm`` averaged
+    over scenarios for each seed (point: mean over seeds, bar: 95 % t-interval) against the
+    median over rows of ``us_per_tick_p99`` (bar: 25th to 75th percentile)."""
+    from rippleb.report import method_order, t_interval
+
+    plt = _pyplot()
+    ok = frame[frame["status"] == "ok"]
+    names = method_order(ok["method"].unique())
+    # Average only over scenarios every method finished, so that a method is not favoured
+    # by missing its hardest scenario.
+    common = set.intersection(*(set(ok.loc[ok["method"] == m, "scenario"]) for m in names)) if names else set()
+    ok = ok[ok["scenario"].isin(common)]
+    fig, ax = plt.subplots(figsize=(9, 6))
+    for k, name in enumerate(names):
+        rows = ok[ok["method"] == name]
+        per_seed = rows.groupby("seed")["rms_error_nm"].mean()
+        y, half, _ = t_interval(per_seed)
+        cost = rows["us_per_tick_p99"].dropna()
+        if cost.empty or not np.isfinite(y):
+            continue
+        x, lo, hi = np.percentile(cost, [50, 25, 75])
+        kw = style(name, k)
+        ax.errorbar([x], [y], xerr=[[x - lo], [hi - x]], yerr=[[half if np.isfinite(half) else 0]] * 2,
+                    fmt="o", ms=7, color=kw["color"], capsize=3)
+        ax.annotate(name, (x, y), textcoords="offset points", xytext=(6, 5), fontsize=8)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    n_seeds, n_scen = ok["seed"].nunique(), ok["scenario"].nunique()
+    ax.set(xlabel="compute time of one control tick, p99 [us] (median over rows; bar 25-75 %)",
+           ylabel="RMS error against torque_true [Nm]",
+           title=f"Accuracy against per-tick cost: mean over the {n_scen} scenarios every method "
+                 f"finished,\nthen over {n_seeds} seed(s) (bar: 95 % t-interval)")
+    ax.grid(alpha=0.3, which="both")
+    fig.tight_layout()
+    return _save(fig, out_png)
+
+
+def draw_all(frame, out_dir, seed: int = 0) -> tuple[dict, list]:
+    """Every figure the run allows, into ``out_dir``.
+
+    Signal figures use the run's methods with at least one ok row, on the scenarios of
+    :data:`SIGNAL_SCENARIOS` that the run scored, re-simulated on ``seed``.
+
+    Returns
+    -------
+    figures, warnings
+        ``{name: (path, caption)}`` in README order, and one line per method or figure
+        that could not be drawn.
+    """
+    from rippleb.report import method_order
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    figures, warnings = {}, []
+    figures["fig2_order_spectra"] = (plot_order_spectra(out_dir / "fig2_order_spectra.png", seed=seed),
+                                     f"Strain spectra over time and over angle (Fig. 2 replica, seed {seed})")
+    ok = frame[frame["status"] == "ok"]
+    methods = method_order(ok["method"].unique())
+    scenarios = [s for s in SIGNAL_SCENARIOS if s in set(ok["scenario"])]
+    signals = {}
+    if methods and scenarios:
+        fitted, errors = fit_methods(methods, seed)
+        warnings += [f"figures: {m} not drawn, fit failed: {e}" for m, e in errors.items()]
+        for scenario in scenarios:
+            signals[scenario] = stream_methods(fitted, scenario, seed)
+            warnings += [f"figures: {m} not drawn on {scenario}: {e}"
+                         for m, e in signals[scenario].errors.items()]
+            warnings += _check_against_rows(signals[scenario], ok, scenario, seed)
+    if "paper-quintic" in signals:
+        sig = signals["paper-quintic"]
+        figures["fig5_ripple_compensation"] = (
+            plot_ripple_compensation(sig, out_dir / "fig5_ripple_compensation.png", seed),
+            f"Raw against order-tracking filtered torque on paper-quintic (Fig. 5 replica, seed {seed})")
+        figures["fig6_estimates"] = (
+            plot_estimates(sig, out_dir / "fig6_estimates.png", seed),
+            f"Each estimate against the model reference on paper-quintic (Fig. 6 replica, seed {seed})")
+    if signals:
+        figures["error_vs_speed"] = (
+            plot_error_vs_speed(list(signals.values()), out_dir / "error_vs_speed.png", seed),
+            f"RMS error against joint speed per method (seed {seed})")
+    if "stop-restart" in signals:
+        path = plot_restart_zoom(signals["stop-restart"], out_dir / "restart_zoom.png", seed)
+        if path is not None:
+            figures["restart_zoom"] = (path, f"Zoom on a restart of stop-restart (seed {seed})")
+    figures["accuracy_vs_cost"] = (plot_accuracy_vs_cost(frame, out_dir / "accuracy_vs_cost.png"),
+                                   "Accuracy against per-tick cost, from the rows")
+    return figures, warnings
+
+
+def _check_against_rows(sig: ScenarioSignals, ok, scenario: str, seed: int) -> list[str]:
+    """A figure's signal must be the one its row scored; a method whose ``reset`` leaks
+    state between runs (or a stale table) shows up here as a mismatch."""
+    from rippleb.metrics import rms_error
+
+    out = []
+    mask = np.asarray(sig.sim.eval_mask, bool)
+    for name, est in sig.estimates.items():
+        rows = ok[(ok["method"] == name) & (ok["scenario"] == scenario) & (ok["seed"] == seed)]
+        if rows.empty:
+            continue
+        mine = rms_error(est, sig.sim.log.torque_true, mask)
+        theirs = float(rows["rms_error_nm"].iloc[0])
+        if not np.isclose(mine, theirs, rtol=1e-9, atol=1e-12):
+            out.append(f"figures: {name} on {scenario} seed {seed}: rms_error_nm {mine:.6g} in the figure, "
+                       f"{theirs:.6g} in the row (does reset() clear all state? is the run stale?)")
+    return out

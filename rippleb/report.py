@@ -171,15 +171,15 @@ def ranking_markdown(frame, column: str = "rms_error_nm") -> str:
 
 
 def _lead_sentence(group) -> str:
-    first = group.iloc[0]
+    first = group.iloc[0].to_dict()
     if len(group) < 2:
-        return f"{first.method} is the only method with ok rows"
-    second = group.iloc[1]
-    if not (np.isfinite(first.half) and np.isfinite(second.half)):
-        return f"{first.method} leads; one seed gives no interval to judge the lead"
-    if first.mean + first.half < second.mean - second.half:
-        return f"{first.method} leads {second.method}; the 95 % intervals do not overlap"
-    return f"{first.method} and {second.method} are not separated: their 95 % intervals overlap"
+        return f"{first['method']} is the only method with ok rows"
+    second = group.iloc[1].to_dict()
+    if not (np.isfinite(first["half"]) and np.isfinite(second["half"])):
+        return f"{first['method']} leads; one seed gives no interval to judge the lead"
+    if first["mean"] + first["half"] < second["mean"] - second["half"]:
+        return f"{first['method']} leads {second['method']}; the 95 % intervals do not overlap"
+    return f"{first['method']} and {second['method']} are not separated: their 95 % intervals overlap"
 
 
 def table_one(frame):
@@ -357,7 +357,7 @@ def git_state(root: Path | None = None) -> dict:
     outside a git checkout (e.g. an installed wheel)."""
     root = Path(root) if root is not None else Path(__file__).resolve().parent.parent
     try:
-        commit = _git(root, "rev-parse", "HEAD")
+        commit = _git(root, "rev-parse", "HEAD").strip()
         status = _git(root, "status", "--porcelain", "--", *CODE_PATHS)
     except (OSError, subprocess.CalledProcessError):
         return {"git_commit": "unknown", "git_dirty": "unknown", "git_dirty_paths": []}
@@ -367,7 +367,7 @@ def git_state(root: Path | None = None) -> dict:
 
 def _git(root: Path, *args: str) -> str:
     return subprocess.run(["git", "-C", str(root), *args], check=True, capture_output=True,
-                          text=True, timeout=20).stdout.strip()
+                          text=True, timeout=20).stdout  # not stripped: porcelain lines start with a space
 
 
 def read_run_provenance(run_dir: Path) -> dict:
@@ -449,6 +449,50 @@ def load_rows(run_dir):
     return frame
 
 
+def tables_markdown(frame) -> str:
+    """The README's tables and their sentences: a pure function of the rows, so
+    ``tests/test_published.py`` can regenerate it and find it in ``results/README.md``."""
+    parts = []
+    for column, (title, unit) in MATRIX_COLUMNS.items():
+        parts += [f"## `{column}`: {title} [{unit}]", "", matrix_markdown(frame, column), ""]
+    parts += ["## Ranking per scenario (by `rms_error_nm`)", "", ranking_markdown(frame), ""]
+    parts += ["## The paper's Table I, replicated", "", table_one_markdown(frame), ""]
+    parts += ["## Rows that did not finish ok", "", failed_markdown(frame)]
+    return "\n".join(parts)
+
+
+def read_results_exact(path):
+    """A results CSV with every float parsed back to the exact double that was written
+    (pandas' default parser may differ in the last bit)."""
+    import pandas as pd
+
+    return pd.read_csv(path, float_precision="round_trip")
+
+
+def compare_rows(published, fresh, columns=ACCURACY_COLUMNS) -> list[str]:
+    """Differences between the rows of ``fresh`` and the same (method, scenario, seed) rows
+    of ``published``, in ``columns``, compared exactly (NaN equals NaN).
+
+    Returns one line per missing row or differing value; empty when they agree.
+    """
+    keys = ["method", "scenario", "seed"]
+    pub = published.set_index(keys)
+    problems = []
+    for row in fresh.itertuples(index=False):
+        row = row._asdict()
+        key = tuple(row[k] for k in keys)
+        if key not in pub.index:
+            problems.append(f"{key}: not in the published rows")
+            continue
+        old = pub.loc[key]
+        for col in ("status",) + tuple(columns):
+            a, b = old[col], row[col]
+            same = (a == b) or (isinstance(a, float) and isinstance(b, float) and np.isnan(a) and np.isnan(b))
+            if not same:
+                problems.append(f"{key} {col}: published {a!r}, re-run {b!r}")
+    return problems
+
+
 def readme_markdown(frame, prov: dict, figures: dict) -> str:
     """``results/README.md``: every number from ``frame`` or ``prov``."""
     counts = frame["status"].value_counts()
@@ -466,11 +510,7 @@ def readme_markdown(frame, prov: dict, figures: dict) -> str:
         f"interval of the mean (Student t with n-1 degrees of freedom, n the number of ok seeds; "
         f"`(n=k)` marks cells with fewer ok seeds than the run).",
     ]
-    for column, (title, unit) in MATRIX_COLUMNS.items():
-        parts += ["", f"## `{column}`: {title} [{unit}]", "", matrix_markdown(frame, column)]
-    parts += ["", "## Ranking per scenario (by `rms_error_nm`)", "", ranking_markdown(frame)]
-    parts += ["", "## The paper's Table I, replicated", "", table_one_markdown(frame)]
-    parts += ["", "## Rows that did not finish ok", "", failed_markdown(frame)]
+    parts += ["", tables_markdown(frame)]
     if figures:
         parts += ["", "## Figures", ""]
         for name, (path, caption) in figures.items():

@@ -1,0 +1,127 @@
+"""End to end through the real command (``python -m rippleb`` in a subprocess)."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def rippleb(*args, cwd=None, env=None, timeout=300):
+    return subprocess.run([sys.executable, "-m", "rippleb", *map(str, args)], capture_output=True,
+                          text=True, cwd=cwd, env=env, timeout=timeout)
+
+
+def test_help_of_every_command():
+    for command in ([], ["list"], ["run"], ["simulate"], ["report"]):
+        proc = rippleb(*command, "--help")
+        assert proc.returncode == 0 and "usage: rippleb" in proc.stdout
+
+
+def test_list_shows_methods_and_scenarios():
+    proc = rippleb("list")
+    assert proc.returncode == 0
+    assert "raw" in proc.stdout and "builtin" in proc.stdout
+    assert "paper-quintic" in proc.stdout and "calibration                  not scored" in proc.stdout
+
+
+@pytest.mark.parametrize("args, message", [
+    (["run", "--methods", "rwa"], "unknown method 'rwa' (did you mean 'raw'?)"),
+    (["run", "--methods", "raw", "--scenarios", "paper-quintc"], "did you mean paper-quintic"),
+    (["simulate", "nope", "--out", "x.csv"], "unknown scenario"),
+    (["simulate", "paper-quintic", "--out", "x.txt"], "unsupported log format"),
+    (["report", "missing-dir"], "no results.csv"),
+    (["run", "--log", "missing.csv"], "no such file"),
+    (["run", "--resume", "missing-dir"], "cannot resume"),
+])
+def test_errors_are_one_line_exit_2(tmp_path, args, message):
+    proc = rippleb(*args, cwd=tmp_path)
+    assert proc.returncode == 2
+    assert proc.stderr.startswith("rippleb: error: ") and proc.stderr.count("\n") == 1
+    assert message in proc.stderr and "Traceback" not in proc.stderr
+    assert not (tmp_path / "runs").exists()
+
+
+def test_debug_shows_the_traceback(tmp_path):
+    proc = rippleb("--debug", "run", "--methods", "rwa", cwd=tmp_path)
+    assert proc.returncode != 0 and "Traceback" in proc.stderr
+
+
+def test_simulate_run_and_report(tmp_path):
+    log = tmp_path / "log.parquet"
+    assert rippleb("simulate", "static-contact", "--seed", "1", "--out", log).returncode == 0
+    assert set(pd.read_parquet(log).columns) == {"t", "strain", "encoder", "current", "torque_true", "torque_ref"}
+
+    out = tmp_path / "run"
+    proc = rippleb("run", "--methods", "raw,lowpass", "--scenarios", "static-contact", "--seeds", "1",
+                   "--jobs", "2", "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    assert "total wall time" in proc.stdout
+    rows = pd.read_csv(out / "results.csv")
+    assert sorted(rows.method) == ["lowpass", "raw"] and (rows.status == "ok").all()
+
+    published = tmp_path / "published"
+    proc = rippleb("report", out, "--out", published, "--no-figures")
+    assert proc.returncode == 0, proc.stderr
+    assert pd.read_csv(published / "results.csv").equals(rows)
+
+    # the simulated log run as a recording: scored against its torque_ref
+    proc = rippleb("run", "--log", log, "--methods", "raw", "--out", tmp_path / "rec")
+    assert proc.returncode == 0, proc.stderr
+    rec = pd.read_csv(tmp_path / "rec" / "results.csv")
+    assert rec.loc[0, "scenario"] == "log:log.parquet" and rec.loc[0, "rms_error_ref_nm"] > 0
+
+
+def test_bad_recorded_log_names_the_column(tmp_path):
+    frame = pd.DataFrame({"t": [0.0, 1e-4, 5e-5], "strain": 0.0, "encoder": 0, "current": 0.0})
+    frame.to_csv(tmp_path / "rec.csv", index=False)
+    proc = rippleb("run", "--log", tmp_path / "rec.csv", cwd=tmp_path)
+    assert proc.returncode == 2 and "column t must strictly increase" in proc.stderr
+
+
+@pytest.mark.slow
+def test_sigint_then_resume(tmp_path):
+    out = tmp_path / "run"
+    args = [sys.executable, "-m", "rippleb", "run", "--methods", "raw,lowpass", "--scenarios",
+            "paper-quintic,creep,reversal", "--seeds", "3", "--jobs", "1", "--out", str(out),
+            "--no-progress"]
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:   # interrupt once some, not all, rows are done
+        if (out / "results.csv").is_file() and len(pd.read_csv(out / "results.csv")) >= 2:
+            break
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and "interrupted" in err
+    kept = pd.read_csv(out / "results.csv")
+    assert 2 <= len(kept) < 18 and (kept.status == "ok").all()
+
+    resumed = rippleb("run", "--resume", out, "--no-progress")
+    assert resumed.returncode == 0, resumed.stderr
+    rows = pd.read_csv(out / "results.csv")
+    assert len(rows) == 18 and not rows.duplicated(["method", "scenario", "seed"]).any()
+    assert set(kept.run_id) < set(rows.run_id)   # the kept rows were not rerun
+
+
+@pytest.mark.slow
+def test_non_editable_install_lists_builtins(tmp_path):
+    target = tmp_path / "site"
+    proc = subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps",
+                           "--target", str(target), str(ROOT)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    env = {**os.environ, "PYTHONPATH": str(target)}
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    proc = rippleb("list", cwd=elsewhere, env=env)
+    assert proc.returncode == 0, proc.stderr
+    assert str(target) in subprocess.run([sys.executable, "-c", "import rippleb; print(rippleb.__file__)"],
+                                         capture_output=True, text=True, cwd=elsewhere, env=env).stdout
+    for name in ("raw", "lowpass", "paper-quintic", "calibration"):
+        assert name in proc.stdout

@@ -1,0 +1,141 @@
+"""Third-party plugins, pip-installed from packages built in a temporary directory."""
+
+import os
+import re
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.slow
+
+MISBEHAVING = '''
+import time
+import numpy as np
+from rippleb import Method
+
+class Raises(Method):
+    name = "raises"
+    def step(self, block):
+        raise ValueError("plugin bug")
+
+class Nans(Method):
+    name = "nans"
+    def step(self, block):
+        return np.full(len(block), np.nan)
+
+class Short(Method):
+    name = "short"
+    def step(self, block):
+        return np.zeros(3)
+
+class Sleeps(Method):
+    name = "sleeps"
+    def step(self, block):
+        time.sleep(3600)
+
+class Chatty(Method):
+    name = "chatty"
+    def step(self, block):
+        print("hello from a plugin")
+        return block.strain * 0.0
+'''
+
+
+def readme_blocks():
+    """The plugin exactly as printed in the README: (pyproject.toml, module source)."""
+    text = (ROOT / "README.md").read_text()
+    toml = re.search(r"`rippleb-median/pyproject.toml`:\n\n```toml\n(.*?)```", text, re.S).group(1)
+    module = re.search(r"`rippleb-median/rippleb_median.py`:\n\n```python\n(.*?)```", text, re.S).group(1)
+    return toml, module
+
+
+def _package(root, name, module, source, entry_points):
+    root.mkdir()
+    eps = "\n".join(f'{k} = "{module}:{v}"' for k, v in entry_points.items())
+    (root / "pyproject.toml").write_text(textwrap.dedent(f'''\
+        [build-system]
+        requires = ["setuptools>=61"]
+        build-backend = "setuptools.build_meta"
+
+        [project]
+        name = "{name}"
+        version = "0.1.0"
+
+        [project.entry-points."rippleb.methods"]
+        ''') + eps + "\n")
+    (root / f"{module}.py").write_text(source)
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory):
+    """A --target directory with the README plugin and a package of misbehaving plugins."""
+    tmp = tmp_path_factory.mktemp("plugins")
+    toml, module = readme_blocks()
+    readme_pkg = tmp / "rippleb-median"
+    readme_pkg.mkdir()
+    (readme_pkg / "pyproject.toml").write_text(toml)
+    (readme_pkg / "rippleb_median.py").write_text(module)
+    _package(tmp / "bad", "rippleb-bad", "rippleb_bad", MISBEHAVING,
+             {"raises": "Raises", "nans": "Nans", "short": "Short", "sleeps": "Sleeps", "chatty": "Chatty"})
+    _package(tmp / "broken", "rippleb-broken", "rippleb_broken", "import no_such_module\n",
+             {"broken-one": "Anything"})
+    target = tmp / "site"
+    # --no-deps keeps it offline apart from the build backend, which pip caches after the first run
+    proc = subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--target", str(target),
+                           str(readme_pkg), str(tmp / "bad"), str(tmp / "broken")],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    return target
+
+
+def rippleb(site, *args, cwd=None, timeout=300):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")])}
+    return subprocess.run([sys.executable, "-m", "rippleb", *map(str, args)], capture_output=True,
+                          text=True, env=env, cwd=cwd, timeout=timeout)
+
+
+def test_installed_plugins_are_listed_with_their_origin(site):
+    proc = rippleb(site, "list")
+    assert proc.returncode == 0, proc.stderr
+    lines = {line.split()[0]: line for line in proc.stdout.splitlines() if line.startswith("  ")}
+    assert "plugin" in lines["median"] and "rippleb-median" in lines["median"]
+    assert "broken" in lines["broken-one"] and "No module named 'no_such_module'" in lines["broken-one"]
+    assert "builtin" in lines["raw"]
+
+
+def test_misbehaving_plugins_get_their_status_and_the_others_complete(site, tmp_path):
+    out = tmp_path / "run"
+    proc = rippleb(site, "run", "--methods", "median,raises,nans,short,sleeps,chatty,broken-one,raw",
+                   "--scenarios", "static-contact", "--seeds", "1", "--jobs", "2", "--timeout", "20",
+                   "--out", out, "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    assert "hello from a plugin" not in proc.stdout
+    rows = pd.read_csv(out / "results.csv").set_index("method")
+    assert rows.status.to_dict() == {"median": "ok", "raises": "error", "nans": "invalid", "short": "invalid",
+                                     "sleeps": "timeout", "chatty": "ok", "broken-one": "error", "raw": "ok"}
+    assert rows.loc["raises", "message"] == "ValueError: plugin bug"
+    assert "no_such_module" in rows.loc["broken-one", "message"]
+    assert rows.loc["median", "params"] == '{"window": 200}'
+
+
+def test_the_readme_plugin_passes_check_method(site):
+    code = "from rippleb.testing import check_method; from rippleb_median import Median; check_method(Median)"
+    env = {**os.environ, "PYTHONPATH": str(site)}
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_a_plugin_named_like_a_builtin_is_a_clear_error(tmp_path):
+    _package(tmp_path / "clash", "rippleb-clash", "rippleb_clash", "", {"raw": "Raw"})
+    target = tmp_path / "site"
+    subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--target", str(target),
+                    str(tmp_path / "clash")], check=True, capture_output=True)
+    proc = rippleb(target, "list")
+    assert proc.returncode == 2
+    assert proc.stderr.startswith("rippleb: error: two methods are named 'raw'")
+    assert "rippleb-clash" in proc.stderr and "Traceback" not in proc.stderr

@@ -199,35 +199,40 @@ class CurrentBased(Method):
         self.motion_ = motion_filter(spec.fs, self.velocity_cutoff, self.accel_cutoff)
         self.output_ = biquad_ss(*signal.butter(2, self.cutoff, fs=spec.fs))
         self.lifted_ = {}
-        self.rad_per_count_ = 2.0 * np.pi / spec.counts_per_rev
+        self._lifted(spec.block_size)    # the runner's block length, built before the first tick
         self.x_motion_ = np.zeros(self.motion_[0].shape[0])
         self.x_out_ = None               # output low-pass state, set on the first sample
         self.last_count_ = None
 
     def step(self, block: SensorBlock) -> np.ndarray:
         """Friction-compensated current torque of ``block``, low-passed."""
-        counts = np.asarray(block.encoder)
-        if self.last_count_ is None and len(counts):
-            self.last_count_ = int(counts[0])
+        counts = block.encoder
         m = len(counts)
         if m == 0:
             return np.zeros(0)
-        rate = np.diff(counts, prepend=self.last_count_) * (self.rad_per_count_ * self.spec_.fs)
-        self.last_count_ = int(counts[-1])
+        if self.last_count_ is None:
+            self.last_count_ = int(counts[0])
         motion, out = self._lifted(m)
-        va = motion[0] @ np.concatenate([self.x_motion_, rate])
-        self.x_motion_ = motion[1] @ np.concatenate([self.x_motion_, rate])
-        tau = self._torque(np.asarray(block.current, dtype=float), va[:m], va[m:])
+        n = len(self.x_motion_)
+        z = np.empty(n + m)              # [state, count increments]; counts -> rad/s is in the matrix
+        z[:n] = self.x_motion_
+        z[n] = counts[0] - self.last_count_
+        np.subtract(counts[1:], counts[:-1], out=z[n + 1:])
+        self.last_count_ = int(counts[-1])
+        va = motion @ z
+        self.x_motion_ = va[2 * m:]
+        tau = self._torque(np.asarray(block.current, dtype=float), va[:m], va[m:2 * m])
         if self.x_out_ is None:
             self.x_out_ = steady_state(self.output_[0], self.output_[1], tau[0])
-        z = np.concatenate([self.x_out_, tau])
-        self.x_out_ = out[1] @ z
-        return out[0] @ z
+        y = out @ np.concatenate([self.x_out_, tau])
+        self.x_out_ = y[m:]
+        return y[:m]
 
     def _torque(self, current: np.ndarray, w: np.ndarray, a: np.ndarray) -> np.ndarray:
         """Joint torque per sample from current, velocity and acceleration."""
         spec, f = self.spec_, self.friction_
-        s = soft_sign(w, self.sign_width)
+        s = w * (1.0 / self.sign_width)
+        np.clip(s, -1.0, 1.0, out=s)          # soft_sign, in place
         motor = (spec.torque_constant * current - spec.rotor_inertia * a
                  - stribeck(w, f["coulomb"], f["static"], f["speed"], f["viscous"], sign=s)
                  - f["offset"])
@@ -236,11 +241,12 @@ class CurrentBased(Method):
         return spec.gear_ratio * motor / (f["scale"] + f["load"] * s * np.sign(motor))
 
     def _lifted(self, m: int):
-        """``([O T], [Am R])`` of the motion estimator and of the output low-pass."""
+        """``[[O, T], [Am, R]]`` of the motion estimator (input in encoder counts per
+        sample) and of the output low-pass, each one matrix: one product per tick."""
         if m not in self.lifted_:
-            mats = []
-            for system in (self.motion_, self.output_):
-                O, T, Am, R = lift(*system, m)
-                mats.append((np.hstack([O, T]), np.hstack([Am, R])))
-            self.lifted_[m] = tuple(mats)
+            O, T, Am, R = lift(*self.motion_, m)
+            scale = 2.0 * np.pi / self.spec_.counts_per_rev * self.spec_.fs
+            motion = np.block([[O, T * scale], [Am, R * scale]])
+            O, T, Am, R = lift(*self.output_, m)
+            self.lifted_[m] = (motion, np.block([[O, T], [Am, R]]))
         return self.lifted_[m]

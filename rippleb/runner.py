@@ -5,10 +5,15 @@ A run has two kinds of jobs, both in forked children of :class:`rippleb.pool.Poo
 * a *simulation* job per (scenario, seed), including ``calibration`` per seed: it calls
   ``simulate(scenario, seed)`` once and stores the log and the truth the metrics need in
   an ``.npz`` file of the run's cache (plain arrays, read with ``allow_pickle=False``);
-* a *row* job per method x scenario x seed, started once both its simulations exist: it
-  loads them, ``fit``s the method on the calibration log (with ``torque_ref``),
-  ``reset``s it, streams the evaluation log in blocks of ``spec.block_size`` samples
-  (:func:`rippleb.streaming.stream`), and scores the estimate (:mod:`rippleb.metrics`).
+* a *fit* job per method x calibration log (i.e. per method and seed): it ``fit``s the
+  method on the calibration log (with ``torque_ref``) once, as on a real device, and
+  pickles the fitted method into the cache;
+* a *row* job per method x scenario x seed, started once its simulations and its fit
+  exist: it loads the fitted method, ``reset``s it, streams the evaluation log in blocks of
+  ``spec.block_size`` samples (:func:`rippleb.streaming.stream`), and scores the estimate
+  (:mod:`rippleb.metrics`). Every row of one fit starts from the same fitted state, so the
+  rows equal those of fitting in each row. A method that cannot be pickled is fitted in
+  each of its rows instead; a fit that fails gives each of its rows the fit's status.
 
 Each row ends as ``ok``, ``error`` (an exception, a memory-limit hit, a crash),
 ``invalid`` (wrong length or dtype, NaN) or ``timeout`` (killed at ``timeout`` seconds),
@@ -22,6 +27,7 @@ from __future__ import annotations
 import contextlib
 import datetime as _dt
 import json
+import pickle
 import re
 import signal
 import sys
@@ -58,6 +64,12 @@ class _Row:
 class _Case:
     scenario: str
     seed: int
+
+
+@dataclass(frozen=True)
+class _Fit:
+    method: str
+    calibration: _Case
 
 
 def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, seed_start: int = 0, jobs: int = 1,
@@ -183,10 +195,15 @@ def _execute(registry, rows, calibration_of, sim_jobs, ready, *, out, jobs, time
     needed = {c for r in rows for c in (_Case(r.scenario, r.seed), calibration_of[r])}
     with _cache_dir(out_dir) as cache:
         paths = {c: cache / f"{_safe(c.scenario)}--{c.seed}.npz" for c in needed}
+        fits = {_Fit(r.method, calibration_of[r]) for r in rows}
+        # Fitted methods live only in this run's own cache; a resumed run fits again.
+        paths.update({f: cache / f"fit--{_safe(f.method)}--{_safe(f.calibration.scenario)}--"
+                             f"{f.calibration.seed}.pkl" for f in fits})
         for case, (log, truth) in ready.items():
             if case in needed:
                 save_case(paths[case], log, truth)
         state = {c: ("done" if c in ready or paths[c].is_file() else "pending") for c in needed}
+        state.update({f: "pending" for f in fits})
         context = _Context(registry, results, calibration_of, paths, calibration_label,
                            _log_dir(out_dir), timeout, time.strftime("%Y%m%dT%H%M%S"))
         with _progress(len(rows), progress) as bar, _sigterm_as_interrupt():
@@ -217,6 +234,8 @@ def _schedule(pool, rows, sim_jobs, state, ctx, bar) -> None:
                 if isinstance(fin.key, _Case):
                     ok = fin.kind == "done" and ctx.paths[fin.key].is_file()
                     state[fin.key] = "done" if ok else f"failed: {_why(fin)}"
+                elif isinstance(fin.key, _Fit):
+                    state[fin.key] = _fit_outcome(fin, ctx)
                 else:
                     _finish_row(fin, ctx, bar)
     finally:
@@ -235,13 +254,25 @@ def _start_next(pool, pending, sim_jobs, state, ctx, bar) -> bool:
             bar.update()
             return True
         if all(state[c] == "done" for c in cases):
+            fit = _Fit(row.method, ctx.calibration_of[row])
+            if state[fit] == "pending":
+                state[fit] = "running"
+                output = str(ctx.log_dir / f"fit--{_safe(row.method)}--{row.seed}.txt") if ctx.log_dir else None
+                pool.submit(fit, _fit_job(fit, ctx), ctx.timeout, output)
+                return True
+            if state[fit] == "running":
+                continue
             pending.remove(row)
+            if state[fit]["status"] != "ok":
+                ctx.results.add(_row_dict(row, ctx, **state[fit]))
+                bar.update()
+                return True
             output = str(ctx.log_dir / f"{_safe(row.method)}--{_safe(row.scenario)}--{row.seed}.txt") \
                 if ctx.log_dir else None
-            pool.submit(row, _row_job(row, ctx), ctx.timeout, output)
+            pool.submit(row, _row_job(row, ctx, state[fit]), ctx.timeout, output)
             return True
     for case, st in state.items():
-        if st == "pending":
+        if isinstance(case, _Case) and st == "pending":
             state[case] = "running"
             scenario, seed = sim_jobs[case]
             pool.submit(case, _sim_job(scenario, seed, ctx.paths[case]), None, None)
@@ -258,12 +289,62 @@ def _sim_job(scenario, seed, path):
     return job
 
 
-def _row_job(row, ctx):
+def _fit_job(fit, ctx):
+    cal_path, out_path = ctx.paths[fit.calibration], ctx.paths[fit]
+    entry = ctx.registry.get(fit.method)
+
+    def job():
+        return fit_and_save(entry.load(), load_case(cal_path)[0], out_path)
+    return job
+
+
+def fit_and_save(cls, calibration: SensorLog, path: Path) -> dict:
+    """Fit a new ``cls`` on ``calibration`` and pickle it to ``path``; return ``status``,
+    ``message``, ``params``, ``fit_s`` and whether it was ``pickled``."""
+    result = {"status": "ok", "message": "", "params": ""}
+    t0 = time.perf_counter()
+    try:
+        method = cls()
+        result["params"] = _params_json(method)
+        method.fit(calibration.for_method(keep_ref=True))
+    except Exception as exc:  # the fit's failure becomes the status of each of its rows
+        import traceback
+
+        traceback.print_exc()
+        return {**result, "status": "error", "message": one_line(exc)}
+    result["fit_s"] = time.perf_counter() - t0
+    try:
+        blob = pickle.dumps(method, protocol=pickle.HIGHEST_PROTOCOL)
+    except Exception:  # not picklable (a lambda, a handle): its rows fit it themselves
+        return {**result, "pickled": False}
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_bytes(blob)
+    tmp.replace(path)
+    return {**result, "pickled": True}
+
+
+def _fit_outcome(fin, ctx) -> dict:
+    if fin.kind == "done":
+        return fin.value
+    if fin.kind == "timeout":
+        return {"status": "timeout", "message": f"fit killed after {ctx.timeout:g} s"}
+    return {"status": "error", "message": f"fit: {_why(fin)}"}
+
+
+def _row_job(row, ctx, fit: dict):
     cal_path, eval_path = ctx.paths[ctx.calibration_of[row]], ctx.paths[_Case(row.scenario, row.seed)]
+    fitted_path = ctx.paths[_Fit(row.method, ctx.calibration_of[row])]
     entry = ctx.registry.get(row.method)
 
     def job():
-        return evaluate(entry.load(), load_case(cal_path)[0], *load_case(eval_path))
+        if not fit.get("pickled"):
+            return evaluate(entry.load(), load_case(cal_path)[0], *load_case(eval_path))
+        entry.load()  # import the method's module before unpickling its instance
+        method = pickle.loads(fitted_path.read_bytes())
+        evaluation, truth = load_case(eval_path)
+        fields = {"status": "ok", "message": "", "n_samples": len(evaluation), "params": fit["params"],
+                  "fit_s": fit["fit_s"]}
+        return run_fitted(method, evaluation, truth, fields)
     return job
 
 
@@ -280,6 +361,17 @@ def evaluate(cls, calibration: SensorLog, evaluation: SensorLog, truth: Truth, p
         result["params"] = _params_json(method)
         method.fit(calibration.for_method(keep_ref=True))
         result["fit_s"] = time.perf_counter() - t0
+    except Exception as exc:  # any failure of the method is its row's status, never the run's
+        import traceback
+
+        traceback.print_exc()
+        return {**result, "status": "error", "message": one_line(exc)}
+    return run_fitted(method, evaluation, truth, result)
+
+
+def run_fitted(method, evaluation: SensorLog, truth: Truth, result: dict) -> dict:
+    """``reset`` a fitted method, stream ``evaluation`` through it and score it into ``result``."""
+    try:
         visible = evaluation.for_method(keep_ref=False)
         method.reset(visible.spec)
         blocks = prepare_blocks(visible)

@@ -462,10 +462,15 @@ def tables_markdown(frame) -> str:
 
 
 def read_results_exact(path):
-    """A results CSV with every float parsed back to the exact double that was written
-    (pandas' default parser may differ in the last bit)."""
+    """A results CSV with every float parsed back to the exact double that was written.
+
+    pandas >= 3 parses with round-trip precision by default (and deprecates the option);
+    older pandas needs ``float_precision="round_trip"``, its default may differ in the last bit.
+    """
     import pandas as pd
 
+    if int(pd.__version__.split(".")[0]) >= 3:
+        return pd.read_csv(path)
     return pd.read_csv(path, float_precision="round_trip")
 
 

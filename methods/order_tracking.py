@@ -105,13 +105,15 @@ def crossings(encoder: np.ndarray, strain: np.ndarray, prev_encoder: int, prev_s
 
 def _crossings(e, s, de):
     """:func:`crossings` on the arrays extended by the previous sample, ``de = diff(e)``."""
-    m = np.abs(de)
-    sample = np.repeat(np.arange(len(de)), m)
+    moved = np.flatnonzero(de)
+    m = np.abs(de[moved])
+    sample = np.repeat(moved, m)
     j = np.arange(len(sample)) - np.repeat(np.cumsum(m) - m, m)
-    frac = (j + 0.5) / m[sample]
+    frac = (j + 0.5) / np.repeat(m, m)
     value = s[sample] + frac * (s[sample + 1] - s[sample])
-    direction = np.sign(de)[sample]
-    label = e[sample] + np.where(direction > 0, j + 1, -j)
+    direction = np.repeat(np.sign(de[moved]), m)
+    # Forward from count c the boundaries c+1, c+2, ...; backward c, c-1, ...
+    label = np.repeat(e[moved], m) + np.where(direction > 0, j + 1, -j)
     return sample, label, direction, value
 
 
@@ -139,7 +141,7 @@ class OrderTracking(Method):
 
     name = "order-tracking"
 
-    def __init__(self, q: float = 15.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.0005,
+    def __init__(self, q: float = 20.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.001,
                  dead_zone: bool = True, back_propagation: bool = True):
         self.q = q
         self.orders = orders
@@ -359,7 +361,7 @@ class OrderTrackingNoDeadzone(OrderTracking):
 
     name = "order-tracking-no-deadzone"
 
-    def __init__(self, q: float = 15.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.0005,
+    def __init__(self, q: float = 20.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.001,
                  dead_zone: bool = False, back_propagation: bool = True):
         super().__init__(q=q, orders=orders, stop_after_s=stop_after_s, dead_zone=dead_zone,
                          back_propagation=back_propagation)
@@ -370,7 +372,7 @@ class OrderTrackingNoBackprop(OrderTracking):
 
     name = "order-tracking-no-backprop"
 
-    def __init__(self, q: float = 15.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.0005,
+    def __init__(self, q: float = 20.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.001,
                  dead_zone: bool = True, back_propagation: bool = False):
         super().__init__(q=q, orders=orders, stop_after_s=stop_after_s, dead_zone=dead_zone,
                          back_propagation=back_propagation)

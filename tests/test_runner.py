@@ -200,9 +200,10 @@ def test_resume_runs_only_the_missing_rows(fake, tmp_path):
     assert both.set_index("method").loc["raw", "run_id"] == first.loc[0, "run_id"]
 
 
-def test_sigint_keeps_the_finished_rows(fake, tmp_path):
-    # SIGINT arrives while 'sleeps' blocks the run; the rows before it are on disk.
-    timer = threading.Timer(4.0, signal.raise_signal, (signal.SIGINT,))
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_interrupt_keeps_the_finished_rows(fake, tmp_path, signum):
+    # The signal arrives while 'sleeps' blocks the run; the rows before it are on disk.
+    timer = threading.Timer(4.0, signal.raise_signal, (signum,))
     timer.start()
     with pytest.raises(KeyboardInterrupt):
         rippleb.run(methods="raw,perfect,sleeps", scenarios="paper-quintic", seeds=1, jobs=1,

@@ -286,9 +286,14 @@ def plot_estimates(sig: ScenarioSignals, out_png, seed: int = 0) -> Path:
         ax.grid(alpha=0.3)
     for ax in axes.flat[len(panels):]:
         ax.set_visible(False)
+    if len(panels) % ncols:  # the panel above an empty slot ends its column: give it the time axis
+        above = axes[-2, len(panels) % ncols] if nrows > 1 else None
+        if above is not None:
+            above.xaxis.set_tick_params(labelbottom=True)
+            above.set_xlabel("time [s]")
     for ax in axes[:, 0]:
         ax.set_ylabel("torque [Nm]")
-    for ax in axes[-1, :]:
+    for ax in axes[-1, : len(panels) - (nrows - 1) * ncols]:
         ax.set_xlabel("time [s]")
     fig.suptitle(f"Estimates against the model reference on paper-quintic, device seed {seed} "
                  "(replica of Jung et al. 2017, Fig. 6)", fontsize=10)

@@ -91,6 +91,7 @@ def test_table_one_replica_from_a_synthetic_frame():
     assert table.loc["max", "ratio_pct"] == pytest.approx(100 * 5 / 9)
     assert table.loc["rms", "ratio_pct"] == pytest.approx(100 * 1.0 / 1.5)
     # per-seed ratios 50 % and 60 %: mean 55, half-width t_{0.975,1} * s / sqrt(2)
+    assert table.loc["max", "ratio_pct_seeds"] == pytest.approx(55.0)
     assert table.loc["max", "ratio_pct_half"] == pytest.approx(12.706205 * np.std([50, 60], ddof=1) / np.sqrt(2))
     assert table.loc["rms", "n"] == 2
     assert (table.loc["max", "paper_current-based"], table.loc["max", "paper_order-tracking"],

@@ -460,7 +460,8 @@ def tables_markdown(frame) -> str:
     ``tests/test_published.py`` can regenerate it and find it in ``results/README.md``."""
     parts = []
     for column, (title, unit) in MATRIX_COLUMNS.items():
-        parts += [f"## `{column}`: {title} [{unit}]", "", matrix_markdown(frame, column), ""]
+        if column in frame:  # rows of an older rippleb may lack a column
+            parts += [f"## `{column}`: {title} [{unit}]", "", matrix_markdown(frame, column), ""]
     parts += ["## Ranking per scenario (by `rms_error_nm`)", "", ranking_markdown(frame), ""]
     parts += ["## The paper's Table I, replicated", "", table_one_markdown(frame), ""]
     parts += ["## Rows that did not finish ok", "", failed_markdown(frame)]
@@ -500,8 +501,13 @@ def compare_rows(published, fresh, columns=ACCURACY_COLUMNS) -> list[str]:
             a, b = old[col], row[col]
             same = (a == b) or (isinstance(a, float) and isinstance(b, float) and np.isnan(a) and np.isnan(b))
             if not same:
-                problems.append(f"{key} {col}: published {a!r}, re-run {b!r}")
+                problems.append(f"{key} {col}: published {_plain(a)!r}, re-run {_plain(b)!r}")
     return problems
+
+
+def _plain(value):
+    """A numpy scalar as the Python number it holds, so messages show ``0.1``, not ``np.float64(0.1)``."""
+    return value.item() if isinstance(value, np.generic) else value
 
 
 def readme_markdown(frame, prov: dict, figures: dict) -> str:

@@ -45,7 +45,7 @@ def _rerun(tmp_path) -> pd.DataFrame:
     return pd.concat(fresh, ignore_index=True)
 
 
-@pytest.mark.slow
+# Not marked slow (about 10 s): this is the check that keeps results/ honest.
 def test_published_rows_are_reproduced_exactly(tmp_path):
     published = _published()
     problems = report.compare_rows(published, _rerun(tmp_path))

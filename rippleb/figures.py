@@ -231,6 +231,26 @@ def _motion_edges(ax, sig: ScenarioSignals) -> None:
         ax.axvline(t[i], color="k", lw=0.7, ls="--", alpha=0.6)
 
 
+def plot_trajectory(sig: ScenarioSignals, out_png) -> Path:
+    """Replica of the paper's Fig. 4: desired position, velocity and acceleration of the
+    ``paper-quintic`` joint, with the start and end of the motion dashed."""
+    plt = _pyplot()
+    t = sig.sim.log.t
+    q, qd, qdd = sig.sim.scenario.trajectory(t)
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    ax.plot(t, q, "r:", lw=2, label="position $q_d$ [rad]")
+    ax.plot(t, qd, "b--", lw=1.5, label=r"velocity $\omega_d$ [rad/s]")
+    ax.plot(t, qdd, "k-", lw=1.2, label=r"acceleration $\alpha_d$ [rad/s$^2$]")
+    _motion_edges(ax, sig)
+    ax.set(xlabel="time [s]", ylabel="rad, rad/s, rad/s$^2$",
+           title=f"Trajectory of paper-quintic, {sig.sim.scenario.joint} "
+                 "(replica of Jung et al. 2017, Fig. 4)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return _save(fig, out_png)
+
+
 def plot_ripple_compensation(sig: ScenarioSignals, out_png, seed: int = 0) -> Path:
     """Replica of the paper's Fig. 5: the raw strain torque against the order-tracking
     filtered torque on ``paper-quintic`` (top), and their error against the true torque
@@ -464,6 +484,8 @@ def draw_all(frame, out_dir, seed: int = 0) -> tuple[dict, list]:
             warnings += _check_against_rows(signals[scenario], ok, scenario, seed)
     if "paper-quintic" in signals:
         sig = signals["paper-quintic"]
+        figures["fig4_trajectory"] = (plot_trajectory(sig, out_dir / "fig4_trajectory.png"),
+                                      "Trajectory of paper-quintic (Fig. 4 replica)")
         figures["fig5_ripple_compensation"] = (
             plot_ripple_compensation(sig, out_dir / "fig5_ripple_compensation.png", seed),
             f"Raw against order-tracking filtered torque on paper-quintic (Fig. 5 replica, seed {seed})")

@@ -150,7 +150,7 @@ class CurrentBased(Method):
 
     name = "current-based"
 
-    def __init__(self, cutoff=130.0, velocity_cutoff=50.0, accel_cutoff=50.0, sign_width=0.5,
+    def __init__(self, cutoff=130.0, velocity_cutoff=200.0, accel_cutoff=25.0, sign_width=0.5,
                  load_dependent=True):
         self.cutoff = cutoff
         self.velocity_cutoff = velocity_cutoff

@@ -119,8 +119,8 @@ class SwitchedNotch(Method):
 
     name = "switched-notch"
 
-    def __init__(self, orders=(2, 4, 8), n_bands=None, min_speed=0.5, max_speed=50.0, q=2.0,
-                 hysteresis=0.2, speed_window=10):
+    def __init__(self, orders=(2, 4, 8), n_bands=None, min_speed=2.0, max_speed=50.0, q=8.0,
+                 hysteresis=0.3, speed_window=80):
         self.orders = orders
         self.n_bands = n_bands
         self.min_speed = min_speed

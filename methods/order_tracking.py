@@ -222,28 +222,34 @@ class OrderTracking(Method):
         s[0] = self.prev_strain_
         s[1:] = strain
         steps = de[moved]
+        moving = np.cumsum(de != 0)              # moving samples up to each sample
+        # A restart is a crossing after more than stop_samples samples without one.
+        restarts = np.flatnonzero(moved[1:] - moved[:-1] > self.stop_samples_) + 1
+        if self.samples_ + moved[0] - self.last_cross_ > self.stop_samples_:
+            restarts = np.concatenate(([0], restarts))
         if steps.max() <= 1 and steps.min() >= -1:
             # One crossing per moving sample (below fs counts/s): the same formulas as
             # crossings() with m = 1, without its bookkeeping.
-            first = np.arange(len(moved))
-            sample, direction = moved, steps
+            direction, crossed = steps, moving
             label = e[moved] + (steps > 0)
             x = s[moved] + 0.5 * (s[moved + 1] - s[moved])
         else:
-            sample, label, direction, x = _crossings(e, s, de)
+            _, label, direction, x = _crossings(e, s, de)
             m = np.abs(steps)
-            first = np.cumsum(m) - m
-        when = self.samples_ + moved
-        gaps = when - np.concatenate(([self.last_cross_], when[:-1]))
-        y = self._filter(x, label, direction, first[gaps - 1 >= self.stop_samples_])
-        out = self._output(strain, de, moved, x, y)
-        self.last_cross_ = int(when[-1])
+            restarts = (np.cumsum(m) - m)[restarts]       # first crossing of each sample
+            crossed = np.cumsum(np.abs(de))
+        y = self._filter(x, label, direction, restarts)
+        out = self._output(strain, moved, moving, crossed, x, y)
+        self.last_cross_ = self.samples_ + int(moved[-1])
         self.y_last_, self.offset_last_ = float(y[-1]), float(y[-1] - x[-1])
         return out
 
-    def _output(self, strain, de, moved, x, y):
-        """Latest filtered value per DAQ sample, or raw plus the stop offset in the dead zone."""
-        crossed = np.cumsum(np.abs(de))          # crossings up to and including each sample
+    def _output(self, strain, moved, moving, crossed, x, y):
+        """Latest filtered value per DAQ sample, or raw plus the stop offset in the dead zone.
+
+        ``moving`` and ``crossed`` count the moving samples and the crossings up to and
+        including each sample.
+        """
         held = np.concatenate(([self.y_last_], y))[crossed]
         first_ever = self.last_cross_ == _NEVER
         if not self.dead_zone:
@@ -251,7 +257,7 @@ class OrderTracking(Method):
                 held[:moved[0]] = strain[:moved[0]]
             return held
         since = np.arange(len(strain)) - np.concatenate(
-            ([self.last_cross_ - self.samples_], moved))[np.cumsum(de != 0)]
+            ([self.last_cross_ - self.samples_], moved))[moving]
         offset = np.concatenate(([0.0 if first_ever else self.offset_last_], y - x))[crossed]
         return np.where(since >= self.stop_samples_, strain + offset, held)
 
@@ -273,11 +279,12 @@ class OrderTracking(Method):
         return y
 
     def _run(self, x, state):
-        """Filter ``x`` from ``state``: lifted matrices for a tick, ``lfilter`` for long runs."""
+        """Filter ``x`` from ``state``: one lifted matrix product for a tick, ``lfilter`` for
+        long runs."""
         m = len(x)
         if m <= _LIFT:
-            return (self.lift_O_[:m] @ state + self.lift_T_[:m, :m] @ x,
-                    self.lift_A_[m] @ state + self.lift_R_[:, _LIFT - m:] @ x)
+            out = self.lifted_[m] @ np.concatenate((x, state))
+            return out[:m], out[m:]
         y, zf = cascade(self.sections_, x, state.reshape(-1, 2))
         return y, zf.ravel()
 
@@ -289,10 +296,12 @@ class OrderTracking(Method):
         """
         A, B, C, D = series_ss(*(biquad_ss(b, a) for b, a in self.sections_))
         O, T, _, R = lift(A, B, C, D, _LIFT)
-        powers = [np.eye(len(B))]
-        for _ in range(_LIFT):
-            powers.append(A @ powers[-1])
-        self.lift_O_, self.lift_T_, self.lift_A_, self.lift_R_ = O, T, np.array(powers), R
+        # lifted_[m] maps [x (m samples), state] to [y (m samples), next state].
+        self.lifted_ = [None]
+        power = np.eye(len(B))
+        for m in range(1, _LIFT + 1):
+            power = A @ power
+            self.lifted_.append(np.block([[T[:m, :m], O[:m]], [R[:, _LIFT - m:], power]]))
         self.unit_state_ = np.linalg.solve(np.eye(len(B)) - A, B)   # steady state, input 1
         # Periodic steady state over one revolution: s = (I - A^n)^-1 sum_k A^(n-1-k) B h_k.
         reach = np.empty((len(B), n))
@@ -309,7 +318,8 @@ class OrderTracking(Method):
         """Keep the latest ripple estimate (what the notches removed) at each position."""
         n = len(self.table_)
         pos = label % n
-        if len(pos) > n or np.any(direction != direction[0]):
+        # Without a reversal the labels run one by one, all distinct within a revolution.
+        if len(pos) > n or abs(int(label[-1]) - int(label[0])) != len(pos) - 1:
             # A reversal revisits positions: keep the last visit (fancy assignment order
             # with repeated indices is not guaranteed by numpy).
             pos, last = np.unique(pos[::-1], return_index=True)

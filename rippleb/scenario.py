@@ -34,7 +34,7 @@ SEGMENT_KINDS = ("hold", "move", "ramp", "cruise")
 _NUMBER = (float, int)
 _TOP_KEYS = {"description": (str,), "scored": (bool,), "duration": _NUMBER,
              "temperature_c": _NUMBER, "evaluation": (dict,), "joint": (dict,),
-             "robot": (dict,), "trajectory": (dict,), "load": (list,)}
+             "robot": (dict,), "trajectory": (dict,), "load": (list,), "faults": (dict,)}
 _EVAL_KEYS = {"start": _NUMBER, "stop": _NUMBER}
 _JOINT_KEYS = {f.name: ((int,) if f.type in ("int", int) else _NUMBER)
                for f in dataclasses.fields(JointSpec)}
@@ -44,6 +44,20 @@ _SEGMENT_KEYS = {"kind": (str,), "duration": _NUMBER, "to": _NUMBER, "by": _NUMB
                  "velocity": _NUMBER, "shape": (str,)}
 _LOAD_KEYS = {"torque": _NUMBER, "start": _NUMBER, "stop": _NUMBER, "rise": _NUMBER,
               "known": (bool,)}
+_FAULT_KEYS = {"encoder_missed": _NUMBER, "encoder_spurious_rate": _NUMBER,
+               "strain_full_scale": _NUMBER, "dropout_rate": _NUMBER, "dropout_length": _NUMBER,
+               "bridge_drift": _NUMBER, "current_offset": _NUMBER}
+
+#: Longest log a scenario may ask for, in samples (500 s at 20 kHz; the simulator holds
+#: a few dozen float arrays of this length). Longer would exhaust memory, not simulate.
+MAX_SAMPLES = 10_000_000
+#: Plausible ranges of joint values: beyond them the numbers overflow, not simulate.
+_JOINT_MAX = {"fs": 1.0e6, "gear_ratio": 1000.0, "counts_per_rev": 2**24}
+#: Lubricant temperatures the friction model is meant for [deg C].
+TEMPERATURE_RANGE = (-40.0, 150.0)
+#: An external load above this many times the rated torque would break the drive
+#: (size-25 momentary peak ratings are 4-7 x rated).
+MAX_LOAD_FACTOR = 10.0
 
 #: Defaults: the paper's joint (UR5 shoulder lift stands in for its arm) at a warm
 #: operating temperature. See docs/physics.md for the sources.
@@ -154,6 +168,46 @@ class Load:
 
 
 @dataclass(frozen=True)
+class Faults:
+    """Faulty sensors, all off by default. ``docs/scenarios.md`` says what each models.
+
+    Attributes
+    ----------
+    encoder_missed
+        Probability that one encoder count is lost by the counter (0-1): noise on the
+        A/B lines or an input filter too slow for the edge rate. The count falls behind
+        and stays behind.
+    encoder_spurious_rate
+        Spurious counts per second (Poisson), each +1 or -1: EMI glitches that the
+        quadrature decoder takes for an edge. They accumulate too.
+    strain_full_scale
+        Full scale of the strain ADC [+-V] instead of 10 V: an amplifier gain set too
+        high, so torque peaks clip at the rails.
+    dropout_rate, dropout_length
+        DAQ dropouts per second (Poisson) and the length of each [s]: lost frames that
+        the acquisition fills by holding the last good sample of every channel, so the
+        time grid stays unbroken.
+    bridge_drift
+        Extra bridge zero drift [V/s] (self-heating, moisture in the gauge adhesive).
+    current_offset
+        Extra current-sensor offset [A] (a shifted current-sense amplifier zero).
+    """
+
+    encoder_missed: float = 0.0
+    encoder_spurious_rate: float = 0.0
+    strain_full_scale: float | None = None
+    dropout_rate: float = 0.0
+    dropout_length: float = 0.0
+    bridge_drift: float = 0.0
+    current_offset: float = 0.0
+
+    @property
+    def active(self) -> bool:
+        """True if any fault is configured."""
+        return self != Faults()
+
+
+@dataclass(frozen=True)
 class Scenario:
     """One scenario: the joint, its trajectory, the external loads and the scored window.
 
@@ -175,6 +229,8 @@ class Scenario:
         The ``example-robot-data`` arm, its moving joint, and the angles [rad] of the others.
     segments, loads
         The resolved trajectory and the external torques.
+    faults
+        Faulty sensors (:class:`Faults`); none by default.
     """
 
     name: str
@@ -190,10 +246,35 @@ class Scenario:
     posture: tuple[tuple[str, float], ...]
     segments: tuple[Segment, ...]
     loads: tuple[Load, ...]
+    faults: Faults = Faults()
 
     def trajectory(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Commanded joint position, velocity, acceleration at times ``t``."""
         return evaluate_segments(self.segments, np.asarray(t, dtype=float))
+
+    def check_limits(self) -> "Scenario":
+        """Refuse a trajectory that leaves the moving joint's URDF limits, before any
+        simulation (``simulate`` checks the sampled one again). Sampled densely per
+        segment, so a ramp through a turning point is caught too.
+
+        Raises
+        ------
+        InputError
+            ``<file>: trajectory: <joint> travels over [lo, hi] rad, outside its limits``.
+        """
+        from rippleb import robot as arm
+
+        model = arm.load_model(self.robot)
+        idx = model.joints[model.getJointId(self.joint)].idx_q
+        lo_lim, hi_lim = float(model.lowerPositionLimit[idx]), float(model.upperPositionLimit[idx])
+        t = np.concatenate([np.linspace(seg.t0, min(seg.t1, self.duration), 65)
+                            for seg in self.segments if seg.t0 <= self.duration])
+        q = self.trajectory(t)[0]
+        lo, hi = float(q.min()), float(q.max())
+        if lo < lo_lim or hi > hi_lim:
+            raise InputError(f"{self.path}: trajectory: {self.joint} travels over [{lo:.3f}, {hi:.3f}] "
+                             f"rad, outside its limits [{lo_lim:.3f}, {hi_lim:.3f}]")
+        return self
 
     def external_torque(self, t: np.ndarray, *, known_only: bool = False) -> np.ndarray:
         """Sum of the external torques at ``t`` [Nm] (only known ones if ``known_only``)."""
@@ -273,6 +354,10 @@ def _read_source(name_or_path) -> tuple[str, Path, str]:
         except (OSError, UnicodeDecodeError) as exc:
             raise InputError(f"{candidate}: cannot read: {exc}") from None
     name = str(name_or_path)
+    if not name or any(c in name for c in "/\\") or name.startswith("."):
+        # a name is not a path: it must not reach files outside the built-ins
+        raise InputError(f"{name}: not a built-in scenario name; give a path to a .toml file "
+                         f"for a scenario of your own")
     resource = _scenario_dir() / f"{name}.toml"
     if not resource.is_file():
         close = difflib.get_close_matches(name, builtin_scenarios(), n=3)
@@ -320,21 +405,31 @@ class _Parser:
             self.fail("duration", f"must be positive, got {duration}")
         if duration * spec.fs < 2 * spec.block_size:
             self.fail("duration", f"{duration} s is shorter than two control ticks")
-        loads = tuple(self.load(item, i) for i, item in enumerate(top.get("load", [])))
+        if duration * spec.fs > MAX_SAMPLES:
+            self.fail("duration", f"{duration} s at fs {spec.fs:g} Hz is more than {MAX_SAMPLES} "
+                      f"samples ({MAX_SAMPLES / spec.fs:g} s); split it into shorter scenarios")
+        temperature = float(top.get("temperature_c", DEFAULT_TEMPERATURE_C))
+        if not TEMPERATURE_RANGE[0] <= temperature <= TEMPERATURE_RANGE[1]:
+            self.fail("temperature_c", f"must be within {TEMPERATURE_RANGE[0]:g} to "
+                      f"{TEMPERATURE_RANGE[1]:g} degC, got {temperature:g}")
+        loads = tuple(self.load(item, i, spec) for i, item in enumerate(top.get("load", [])))
         evaluation = self.evaluation(top.get("evaluation", {}), duration)
+        faults = self.faults(top.get("faults", {}), spec)
         return Scenario(name=self.name, path=self.path,
                         description=top.get("description", "").strip(),
                         spec=spec, duration=duration, scored=top.get("scored", True),
                         evaluation=evaluation,
-                        temperature_c=float(top.get("temperature_c", DEFAULT_TEMPERATURE_C)),
+                        temperature_c=temperature,
                         robot=robot, joint=joint, posture=posture,
-                        segments=segments, loads=loads)
+                        segments=segments, loads=loads, faults=faults)
 
     def spec(self, raw) -> JointSpec:
         values = self.table(raw, _JOINT_KEYS, "joint")
         for key, value in values.items():
             if value <= 0:
                 self.fail(f"joint.{key}", f"must be positive, got {value}")
+            if key in _JOINT_MAX and value > _JOINT_MAX[key]:
+                self.fail(f"joint.{key}", f"must be at most {_JOINT_MAX[key]:g}, got {value:g}")
         spec = JointSpec(**{k: (v if k == "counts_per_rev" else float(v)) for k, v in values.items()})
         if spec.control_rate > spec.fs:
             self.fail("joint.control_rate", f"{spec.control_rate} exceeds fs {spec.fs}")
@@ -411,7 +506,24 @@ class _Parser:
             return Segment("ramp", t, duration, q, v, v1=float(values["velocity"]), shape=shape)
         return Segment(kind, t, duration, q, v if kind == "cruise" else 0.0)
 
-    def load(self, raw, i: int) -> Load:
+    def faults(self, raw, spec: JointSpec) -> Faults:
+        values = self.table(raw, _FAULT_KEYS, "faults")
+        ranges = {"encoder_missed": (0.0, 1.0, "a probability in [0, 1]"),
+                  "encoder_spurious_rate": (0.0, spec.fs, f"in [0, fs = {spec.fs:g}] per second"),
+                  "strain_full_scale": (1e-3, 100.0, "in [0.001, 100] V"),
+                  "dropout_rate": (0.0, spec.fs, f"in [0, fs = {spec.fs:g}] per second"),
+                  "dropout_length": (0.0, 10.0, "in [0, 10] s"),
+                  "bridge_drift": (-10.0, 10.0, "in [-10, 10] V/s"),
+                  "current_offset": (-100.0, 100.0, "in [-100, 100] A")}
+        for key, value in values.items():
+            lo, hi, what = ranges[key]
+            if not lo <= value <= hi:
+                self.fail(f"faults.{key}", f"must be {what}, got {value:g}")
+        if values.get("dropout_rate", 0) > 0 and values.get("dropout_length", 0) <= 0:
+            self.fail("faults.dropout_length", "must be positive when dropout_rate is set")
+        return Faults(**{k: float(v) for k, v in values.items()})
+
+    def load(self, raw, i: int, spec: JointSpec | None = None) -> Load:
         where = f"load[{i}]"
         values = self.table(raw, _LOAD_KEYS, where)
         for key in ("torque", "start"):
@@ -423,6 +535,10 @@ class _Parser:
                     known=values.get("known", False))
         if load.rise <= 0:
             self.fail(f"{where}.rise", f"must be positive, got {load.rise}")
+        peak = MAX_LOAD_FACTOR * (spec or JointSpec()).rated_torque
+        if abs(load.torque) > peak:
+            self.fail(f"{where}.torque", f"|{load.torque:g}| Nm exceeds {MAX_LOAD_FACTOR:g} x rated_torque "
+                      f"({peak:g} Nm); the drive would break")
         if load.start < 0:
             self.fail(f"{where}.start", f"must be >= 0, got {load.start}")
         if load.stop < load.start + load.rise:

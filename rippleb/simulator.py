@@ -19,6 +19,7 @@ friction opposing the motor velocity, and cogging.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 from dataclasses import dataclass, field
 
@@ -273,10 +274,18 @@ def simulate(scenario: Scenario | str, seed: int = 0) -> Simulation:
     strain = _strain(device, sc, t, theta_m, tau_true, noise)
     current = _current(device, sc, spec, theta_m, w_m, a_m, tau_true, noise)
     encoder = np.floor(theta_m / (2 * np.pi) * spec.counts_per_rev).astype(np.int64)
+    meta = {"scenario": sc.name, "seed": seed}
+    if sc.faults.active:
+        # Own generator: a faulty scenario's healthy signals stay those of the same
+        # scenario without faults, and scenarios without faults are untouched.
+        fault_rng = np.random.default_rng(
+            np.random.SeedSequence([seed, stable_hash(sc.name), stable_hash("faults")]))
+        encoder = _encoder_faults(encoder, sc.faults, spec.fs, fault_rng)
+        strain, encoder, current = _dropouts((strain, encoder, current), sc.faults, spec.fs, fault_rng)
+        meta["faults"] = {k: v for k, v in dataclasses.asdict(sc.faults).items() if v}
 
     log = SensorLog(spec=spec, t=t, strain=strain, encoder=encoder, current=current,
-                    torque_true=tau_true, torque_ref=tau_ref,
-                    meta={"scenario": sc.name, "seed": seed})
+                    torque_true=tau_true, torque_ref=tau_ref, meta=meta)
     start, stop = sc.evaluation
     return Simulation(log=log, moving=np.abs(qd) > 1e-12, wave_angle=theta_m,
                       joint_velocity=qd, eval_mask=(t >= start) & (t <= stop),
@@ -301,7 +310,10 @@ def _strain(device: Device, sc: Scenario, t, theta_m, tau, noise) -> np.ndarray:
     zero = device.offset + device.offset_temp_coeff * (sc.temperature_c - REFERENCE_TEMPERATURE_C)
     volts = (device.gain * (tau + device.ripple(theta_m, tau)) + zero + device.drift_rate * t
              + STRAIN_NOISE * noise.standard_normal(len(t)))
-    return quantise(volts, STRAIN_RANGE, STRAIN_BITS)
+    if sc.faults.bridge_drift:   # fault: extra bridge zero drift [V/s]
+        volts = volts + sc.faults.bridge_drift * t
+    # fault: a lower full scale (amplifier gain set too high) clips the peaks
+    return quantise(volts, sc.faults.strain_full_scale or STRAIN_RANGE, STRAIN_BITS)
 
 
 def _current(device: Device, sc: Scenario, spec: JointSpec, theta_m, w_m, a_m, tau, noise):
@@ -311,4 +323,43 @@ def _current(device: Device, sc: Scenario, spec: JointSpec, theta_m, w_m, a_m, t
                     + device.cogging(theta_m))
     amps = (motor_torque / spec.torque_constant + device.current_offset
             + CURRENT_NOISE * noise.standard_normal(len(theta_m)))
+    if sc.faults.current_offset:   # fault: shifted current-sense zero [A]
+        amps = amps + sc.faults.current_offset
     return quantise(amps, CURRENT_RANGE, CURRENT_BITS)
+
+
+def _encoder_faults(encoder: np.ndarray, faults, fs: float, rng) -> np.ndarray:
+    """Missed and spurious counts of an incremental encoder counter.
+
+    Each true count is lost with probability ``encoder_missed``; spurious counts of +-1
+    arrive as a Poisson process of ``encoder_spurious_rate`` per second. A counter never
+    learns of either, so both accumulate into a lasting position error.
+    """
+    steps = np.diff(encoder)
+    if faults.encoder_missed:
+        lost = rng.binomial(np.abs(steps), faults.encoder_missed)
+        steps = steps - np.sign(steps) * lost
+    if faults.encoder_spurious_rate:
+        k = rng.poisson(faults.encoder_spurious_rate / fs, len(steps))
+        steps = steps + (2 * rng.binomial(k, 0.5) - k)   # sum of k random +-1
+    return encoder[0] + np.concatenate(([0], np.cumsum(steps))).astype(np.int64)
+
+
+def _dropouts(channels, faults, fs: float, rng):
+    """DAQ dropouts: lost frames filled with the last good sample of every channel.
+
+    Dropouts start as a Poisson process of ``dropout_rate`` per second and last
+    ``dropout_length`` seconds (at least one sample). The first sample is always good.
+    """
+    if not faults.dropout_rate:
+        return channels
+    n = len(channels[0])
+    length = max(1, int(round(faults.dropout_length * fs)))
+    starts = (rng.random(n) < faults.dropout_rate / fs).astype(np.int64)
+    count = np.cumsum(starts)
+    before = np.concatenate((np.zeros(length, dtype=np.int64), count[:-length]))[:n]
+    dropped = (count - before) > 0
+    dropped[0] = False
+    index = np.arange(n)
+    last_good = np.maximum.accumulate(np.where(dropped, 0, index))
+    return tuple(channel[last_good] for channel in channels)

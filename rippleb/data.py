@@ -247,6 +247,9 @@ def write_log(log: SensorLog, path: str | Path) -> Path:
             frame.to_parquet(tmp, index=False)
         tmp.replace(path)
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:  # e.g. the parent is a regular file: there is no tmp to remove
+            pass
         raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None
     return path

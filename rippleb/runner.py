@@ -110,7 +110,8 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, seed_start: int = 
 
     registry = Registry.discover()
     names = resolve_methods(registry, methods)
-    scenario_objs = [load_scenario(s) for s in (_split(scenarios) or scored_scenarios())]
+    # Refuse a trajectory outside the joint's limits here, as one line, not as error rows.
+    scenario_objs = [load_scenario(s).check_limits() for s in (_split(scenarios) or scored_scenarios())]
     seed_list = _seed_list(seeds, seed_start)
     cases = {s.name: s for s in scenario_objs}
     cases.setdefault(CALIBRATION, load_scenario(CALIBRATION))
@@ -527,8 +528,13 @@ def _seed_list(seeds, seed_start: int) -> list[int]:
     if isinstance(seeds, (int, np.integer)):
         if seeds < 1:
             raise InputError(f"--seeds must be at least 1, got {seeds}")
+        if seed_start < 0:
+            raise InputError(f"--seed-start must be a non-negative integer, got {seed_start}")
         return list(range(seed_start, seed_start + int(seeds)))
-    return [int(s) for s in seeds]
+    seeds = [int(s) for s in seeds]
+    if any(s < 0 for s in seeds):
+        raise InputError(f"seeds must be non-negative integers, got {min(seeds)}")
+    return seeds
 
 
 def _params_json(method) -> str:

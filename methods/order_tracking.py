@@ -181,7 +181,10 @@ class OrderTracking(Method):
         self.offset_last_ = 0.0              # filtered - raw at the last crossing
 
     def step(self, block):
-        """Torque estimate [Nm] per sample: gain times the filtered strain plus offset."""
+        """Torque estimate [Nm] per sample: gain times the filtered strain plus offset.
+
+        Without :meth:`fit` the gain is 1 and the offset 0: the filtered strain in volts.
+        """
         gain, offset = getattr(self, "gain_", 1.0), getattr(self, "offset_", 0.0)
         return gain * self.filter_strain(block) + offset
 

@@ -174,6 +174,26 @@ def ranking_markdown(frame, column: str = "rms_error_nm") -> str:
     return _markdown(rows, ["scenario", f"methods by mean {column}, best first", "lead"])
 
 
+def headline_sentences(frame, column: str = "rms_error_nm") -> list[str]:
+    """Who has the lowest mean ``column`` on how many scenarios, and where the paper's
+    method ranks on the paper's scenario; every number from the rows."""
+    ranked = ranking(frame, column)
+    if ranked.empty:
+        return []
+    firsts = ranked[ranked["rank"] == 1]
+    n = len(firsts)
+    out = []
+    for method, group in firsts.groupby("method"):
+        out.append(f"`{method}` has the lowest mean `{column}` on {len(group)} of {n} scenarios "
+                   f"({', '.join(scenario_order(group['scenario']))}).")
+    mine = ranked[(ranked["method"] == TABLE_I_METHODS[1]) & (ranked["scenario"] == TABLE_I_SCENARIO)]
+    if not mine.empty:
+        total = int((ranked["scenario"] == TABLE_I_SCENARIO).sum())
+        out.append(f"The paper's method, `{TABLE_I_METHODS[1]}`, ranks {int(mine['rank'].iloc[0])} of "
+                   f"{total} on `{TABLE_I_SCENARIO}` by `{column}`.")
+    return out
+
+
 def _lead_sentence(group) -> str:
     first = group.iloc[0].to_dict()
     if len(group) < 2:
@@ -527,6 +547,7 @@ def readme_markdown(frame, prov: dict, figures: dict) -> str:
         f"interval of the mean (Student t with n-1 degrees of freedom, n the number of ok seeds; "
         f"`(n=k)` marks cells with fewer ok seeds than the run).",
     ]
+    parts += [""] + [f"- {line}" for line in headline_sentences(frame)]
     parts += ["", tables_markdown(frame)]
     if figures:
         parts += ["", "## Figures", ""]

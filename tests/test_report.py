@@ -65,6 +65,8 @@ def test_ranking_says_whether_the_lead_is_resolved():
     ranked = report.ranking(_frame(rows))
     assert list(ranked["method"]) == ["kalman-ripple", "raw", "lowpass"]
     assert "do not overlap" in report.ranking_markdown(_frame(rows))
+    assert report.headline_sentences(_frame(rows)) == [
+        "`kalman-ripple` has the lowest mean `rms_error_nm` on 1 of 1 scenarios (creep)."]
     close = [r for r in rows if r["method"] != "kalman-ripple"]
     assert "not separated" in report.ranking_markdown(_frame(close))
 

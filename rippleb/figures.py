@@ -438,7 +438,8 @@ def plot_accuracy_vs_cost(frame, out_png) -> Path:
         kw = style(name, k)
         ax.errorbar([x], [y], xerr=[[x - lo], [hi - x]], yerr=[[half if np.isfinite(half) else 0]] * 2,
                     fmt="o", ms=7, color=kw["color"], capsize=3)
-        ax.annotate(name, (x, y), textcoords="offset points", xytext=(6, 5), fontsize=8)
+        # alternate above/below so that neighbours (the order-tracking family) stay legible
+        ax.annotate(name, (x, y), textcoords="offset points", xytext=(6, 5 if k % 2 else -12), fontsize=8)
     ax.set_xscale("log")
     ax.set_yscale("log")
     n_seeds, n_scen = ok["seed"].nunique(), ok["scenario"].nunique()

@@ -1,0 +1,317 @@
+"""Bad input through the real command (``python -m rippleb`` in a subprocess), issue 7 items 1 and 5.
+
+Every case must end with a non-zero exit, exactly one line on stderr that names the file,
+key, column or plugin at fault, no traceback, and nothing that looks like a valid result
+(no ``results.csv``, no log file). One fixture runs every case once; the tests check them.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import subprocess
+import sys
+import textwrap
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from rippleb import InputError, load_scenario, read_log
+
+GOOD = textwrap.dedent("""\
+    [robot]
+    posture = { elbow_joint = 1.5 }
+    [trajectory]
+    start = -1.8
+    [[trajectory.segment]]
+    kind = "move"
+    by = 0.1
+    duration = 0.2
+    """)
+
+
+def _log_frame(n=200, fs=20_000.0):
+    t = np.arange(n) / fs
+    return pd.DataFrame({"t": t, "strain": 0.1 * np.sin(t), "encoder": np.arange(n) // 3,
+                         "current": np.cos(t), "torque_ref": np.sin(t)})
+
+
+class _Payload:
+    """Unpickling this creates a file: proof that a reader executed code."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (open, (self.marker, "w"))
+
+
+def _dist(site: Path, dist: str, module: str, source: str, entry_points: dict[str, str]):
+    """A minimal installed distribution (dist-info with entry points) without pip."""
+    info = site / f"{dist.replace('-', '_')}-0.1.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(
+        "[rippleb.methods]\n" + "".join(f"{k} = {module}:{v}\n" for k, v in entry_points.items()))
+    (site / f"{module}.py").write_text(source)
+
+
+PLUGIN = "from rippleb import Method\nclass Plugin(Method):\n    name = 'x'\n" \
+         "    def step(self, block):\n        return block.strain * 10.0\n"
+
+
+def _setup(root: Path) -> dict:
+    """Write every bad input under ``root``; return {case: (argv, env site or None, words)}."""
+    (root / "not-toml.toml").write_text("this is = not toml [")
+    (root / "unknown-key.toml").write_text("duraton = 2.0\n" + GOOD)
+    (root / "wrong-type.toml").write_text('duration = "long"\n' + GOOD)
+    (root / "impossible.toml").write_text("[joint]\nfs = -1.0\n" + GOOD)
+    (root / "huge.toml").write_text("duration = 1e9\n" + GOOD)
+    (root / "beyond-limits.toml").write_text(GOOD.replace("by = 0.1", "by = 9.0"))
+    (root / "bad-fault.toml").write_text(GOOD + "[faults]\nencoder_missed = 1.5\n")
+    (root / "robot.toml").write_text('[robot]\nname = "ur55"\n' + GOOD.split("[trajectory]")[0].replace(
+        "[robot]\n", "") + "[trajectory]" + GOOD.split("[trajectory]")[1])
+    (root / "joint.toml").write_text(GOOD.replace("[robot]\n", '[robot]\njoint = "knee"\n'))
+    (root / "binary.toml").write_bytes(b"\xff\xfe\x00bad")
+    frame = _log_frame()
+    (root / "empty.csv").write_text("")
+    frame.iloc[:0].to_csv(root / "header-only.csv", index=False)
+    frame.drop(columns="current").to_csv(root / "no-current.csv", index=False)
+    nan = frame.copy()
+    nan.loc[50, "strain"] = np.nan
+    nan.to_csv(root / "nan.csv", index=False)
+    repeat = frame.copy()
+    repeat.loc[60, "t"] = repeat.loc[59, "t"]
+    repeat.to_parquet(root / "repeat.parquet")
+    back = frame.copy()
+    back.loc[70, "t"] = back.loc[68, "t"]
+    back.to_csv(root / "back.csv", index=False)
+    gap = frame.copy()
+    gap.loc[100:, "t"] += 0.01
+    gap.to_csv(root / "gap.csv", index=False)
+    code = frame.astype({"strain": object})
+    code.loc[3, "strain"] = "__import__('os').system('touch PWNED')"
+    code.to_csv(root / "code.csv", index=False)
+    (root / "pickle.parquet").write_bytes(pickle.dumps(_Payload(root / "PWNED")))
+    (root / "pickle.csv").write_bytes(pickle.dumps(_Payload(root / "PWNED")))
+    (root / "a-file").write_text("I am a regular file")
+    frame.to_csv(root / "good.csv", index=False)
+    _dist(root / "site-dup", "rippleb-dup-a", "dup_a", PLUGIN, {"dup": "Plugin"})
+    _dist(root / "site-dup", "rippleb-dup-b", "dup_b", PLUGIN, {"dup": "Plugin"})
+    _dist(root / "site-clash", "rippleb-clash", "clash", PLUGIN, {"raw": "Plugin"})
+    _dist(root / "site-broken", "rippleb-broken", "broken_mod", "import no_such_module_xyz\n",
+          {"broken-one": "Plugin"})
+    run = ["run", "--seeds", "1", "--jobs", "1", "--no-progress", "--methods", "raw"]
+    out = ["--out", "out"]
+    return {
+        # scenario files
+        "scenario not TOML": ([*run, "--scenarios", "not-toml.toml", *out], None, ["not-toml.toml", "not valid TOML"]),
+        "scenario unknown key": ([*run, "--scenarios", "unknown-key.toml", *out], None,
+                                 ["unknown-key.toml: duraton: unknown key", "duration"]),
+        "scenario wrong type": ([*run, "--scenarios", "wrong-type.toml", *out], None,
+                                ["wrong-type.toml: duration: must be a number, got str"]),
+        "scenario impossible value": ([*run, "--scenarios", "impossible.toml", *out], None,
+                                      ["impossible.toml: joint.fs: must be positive"]),
+        "scenario too long": ([*run, "--scenarios", "huge.toml", *out], None, ["huge.toml: duration:", "samples"]),
+        "scenario beyond joint limits": ([*run, "--scenarios", "beyond-limits.toml", *out], None,
+                                         ["beyond-limits.toml: trajectory:", "outside its limits"]),
+        "scenario bad fault": ([*run, "--scenarios", "bad-fault.toml", *out], None,
+                               ["bad-fault.toml: faults.encoder_missed: must be a probability"]),
+        "scenario not UTF-8": (["simulate", "binary.toml", "--out", "x.csv"], None, ["binary.toml: cannot read"]),
+        "unknown robot": ([*run, "--scenarios", "robot.toml", *out], None, ["robot.toml: robot.name: unknown robot 'ur55'"]),
+        "unknown joint": ([*run, "--scenarios", "joint.toml", *out], None, ["joint.toml: robot.joint:", "'knee'"]),
+        "missing scenario file": ([*run, "--scenarios", "nope.toml", *out], None, ["nope.toml: no such scenario file"]),
+        "unknown scenario": ([*run, "--scenarios", "paper-quintc", *out], None, ["paper-quintc: unknown scenario"]),
+        "scenario name with ../": ([*run, "--scenarios", "../scenarios/creep", *out], None,
+                                   ["../scenarios/creep: not a built-in scenario name"]),
+        # recorded logs
+        "log empty file": (["run", "--log", "empty.csv", *out], None, ["empty.csv: cannot read as csv"]),
+        "log without rows": (["run", "--log", "header-only.csv", *out], None, ["header-only.csv: the log is empty"]),
+        "log lacks a column": (["run", "--log", "no-current.csv", *out], None, ["no-current.csv: missing column(s) current"]),
+        "log holds NaN": (["run", "--log", "nan.csv", *out], None, ["nan.csv: column strain holds NaN", "row 50"]),
+        "log t repeats": (["run", "--log", "repeat.parquet", *out], None,
+                          ["repeat.parquet: column t must strictly increase (row 60"]),
+        "log t goes back": (["run", "--log", "back.csv", *out], None, ["back.csv: column t must strictly increase (row 70"]),
+        "log has a gap": (["run", "--log", "gap.csv", *out], None, ["gap.csv: column t has a gap", "row 100"]),
+        "log cell holds code": (["run", "--log", "code.csv", *out], None, ["code.csv: column strain is not numeric"]),
+        "log is a pickle (.parquet)": (["run", "--log", "pickle.parquet", *out], None,
+                                       ["pickle.parquet: cannot read as parquet"]),
+        "log is a pickle (.csv)": (["run", "--log", "pickle.csv", *out], None, ["pickle.csv"]),
+        "log wrong suffix": (["run", "--log", "a-file", *out], None, ["a-file: unsupported log format"]),
+        "calibration log without torque_ref": (["run", "--log", "good.csv", "--calibration", "no-current.csv", *out],
+                                               None, ["no-current.csv: missing column(s) current"]),
+        # names and plugins
+        "unknown method": ([*run[:-1], "rwa", "--scenarios", "creep", *out], None, ["unknown method 'rwa'", "'raw'"]),
+        "two plugins, one name": ([*run, "--scenarios", "creep", *out], "site-dup",
+                                  ["two methods are named 'dup'", "rippleb-dup-a", "rippleb-dup-b"]),
+        "plugin named like a built-in": (["list"], "site-clash", ["two methods are named 'raw'", "rippleb-clash"]),
+        # outputs and arguments
+        "output dir under a regular file": ([*run, "--scenarios", "creep", "--out", "a-file/out"], None,
+                                            ["a-file/out: cannot write the output directory"]),
+        "simulate into a regular file's child": (["simulate", "creep", "--out", "a-file/x.csv"], None,
+                                                 ["a-file/x.csv: cannot write"]),
+        "negative seed": ([*run, "--scenarios", "creep", "--seed-start", "-3", *out], None,
+                          ["--seed-start must be a non-negative integer"]),
+    }
+
+
+#: Cases run as ``python -m rippleb`` in a subprocess: one or more of each kind, and all
+#: that need an installed plugin. The others call ``rippleb.cli.main`` in this process (the
+#: same code after the interpreter starts), which saves ~1.5 s of imports per case.
+SUBPROCESS = {"scenario unknown key", "scenario beyond joint limits", "unknown robot", "log holds NaN",
+              "log is a pickle (.parquet)", "two plugins, one name", "plugin named like a built-in",
+              "output dir under a regular file", "simulate into a regular file's child"}
+
+
+class _Done:
+    def __init__(self, returncode, stderr):
+        self.returncode, self.stderr = returncode, stderr
+
+
+@pytest.fixture(scope="module")
+def outcomes(tmp_path_factory):
+    import contextlib
+    import io
+
+    from rippleb.cli import main
+
+    root = tmp_path_factory.mktemp("bad")
+    cases = _setup(root)
+    before = {p for p in root.rglob("*")}
+
+    def one(item):
+        name, (argv, site, _) = item
+        env = dict(os.environ)
+        if site:
+            env["PYTHONPATH"] = os.pathsep.join([str(root / site), env.get("PYTHONPATH", "")])
+        return name, subprocess.run([sys.executable, "-m", "rippleb", *argv], cwd=root, env=env,
+                                    capture_output=True, text=True, timeout=120)
+
+    with ThreadPoolExecutor(3) as pool:
+        running = pool.map(one, [(k, v) for k, v in cases.items() if k in SUBPROCESS])
+        procs = {}
+        cwd = os.getcwd()
+        try:
+            os.chdir(root)
+            for name, (argv, site, _) in cases.items():
+                if name in SUBPROCESS:
+                    continue
+                assert site is None
+                err = io.StringIO()
+                with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+                    code = main(list(argv))   # any other exception fails the test: a traceback
+                procs[name] = _Done(code, err.getvalue())
+        finally:
+            os.chdir(cwd)
+        procs.update(dict(running))
+    created = sorted(str(p.relative_to(root)) for p in set(root.rglob("*")) - before
+                     if "__pycache__" not in p.parts)
+    return root, cases, procs, created
+
+
+def _case_names():
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        return list(_setup(Path(tmp)))
+
+
+@pytest.mark.parametrize("case", _case_names())
+def test_bad_input_is_one_line_exit_2(outcomes, case):
+    _, cases, procs, _ = outcomes
+    proc, words = procs[case], cases[case][2]
+    assert proc.returncode == 2, (proc.returncode, proc.stderr)
+    assert proc.stderr.startswith("rippleb: error: ") and proc.stderr.count("\n") == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    for word in words:
+        assert word in proc.stderr, proc.stderr
+
+
+def test_nothing_that_looks_like_a_result_is_written(outcomes):
+    root, _, _, created = outcomes
+    # no results.csv, no run directory, no log, and no file made by a payload
+    assert created == [], created
+    assert not (root / "PWNED").exists() and not (root / "out").exists()
+
+
+def test_debug_shows_the_traceback_of_a_bad_file(tmp_path):
+    (tmp_path / "bad.toml").write_text("duraton = 2.0\n" + GOOD)
+    proc = subprocess.run([sys.executable, "-m", "rippleb", "--debug", "simulate", "bad.toml", "--out", "x.csv"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert proc.returncode != 0 and "Traceback" in proc.stderr and "InputError" in proc.stderr
+
+
+# ----------------------------------------------------------------------------- safety (item 5)
+
+
+def test_strings_that_look_like_code_stay_data(tmp_path):
+    marker = tmp_path / "PWNED"
+    text = (f'description = "__import__(\'os\').system(\'touch {marker}\')"\n'
+            + GOOD.replace('posture = { elbow_joint = 1.5 }',
+                           'posture = { elbow_joint = 1.5 }\n# !!python/object/apply:os.system ["touch x"]'))
+    (tmp_path / "code.toml").write_text(text)
+    sc = load_scenario(tmp_path / "code.toml")
+    assert sc.description.startswith("__import__") and not marker.exists()
+    # code in a value where a number belongs is a type error, not an evaluation
+    (tmp_path / "expr.toml").write_text('duration = "1 + 1"\n' + GOOD)
+    with pytest.raises(InputError, match="duration: must be a number, got str"):
+        load_scenario(tmp_path / "expr.toml")
+
+
+def test_a_pickle_disguised_as_a_log_is_not_executed(tmp_path):
+    marker = tmp_path / "PWNED"
+    for suffix in (".csv", ".parquet"):
+        path = tmp_path / f"log{suffix}"
+        path.write_bytes(pickle.dumps(_Payload(marker)))
+        with pytest.raises(InputError, match=str(path.name)):
+            read_log(path)
+    assert not marker.exists()
+
+
+def test_the_cache_refuses_pickled_arrays(tmp_path):
+    from rippleb.runner import load_case
+
+    marker = tmp_path / "PWNED"
+    payload = np.empty(1, dtype=object)
+    payload[0] = _Payload(marker)
+    path = tmp_path / "case.npz"
+    np.savez(path, t=np.arange(3.0), spec=np.array("{}"), meta=np.array("{}"), strain=payload)
+    with pytest.raises(ValueError, match="allow_pickle"):
+        load_case(path)
+    assert not marker.exists()
+
+
+def test_scenario_and_log_readers_use_no_code_loaders():
+    root = Path(__file__).resolve().parents[1] / "rippleb"
+    for name in ("scenario.py", "data.py"):
+        source = (root / name).read_text()
+        for banned in ("pickle", "eval(", "exec(", "yaml", "allow_pickle=True", "__import__"):
+            assert banned not in source, (name, banned)
+    assert "allow_pickle=False" in (root / "runner.py").read_text()
+
+
+def test_names_cannot_make_the_runner_write_outside_out(tmp_path):
+    """A plugin named ``../../escape`` and a scenario file named ``..x.toml``: every file the
+    run writes stays under ``--out``."""
+    site = tmp_path / "site"
+    _dist(site, "rippleb-escape", "escape_mod", PLUGIN, {"../../escape": "Plugin"})
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / "..x.toml").write_text(GOOD)
+    before = set(tmp_path.rglob("*"))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run([sys.executable, "-m", "rippleb", "run", "--methods", "../../escape,raw", "--scenarios",
+                           "..x.toml", "--seeds", "1", "--jobs", "1", "--no-progress", "--out", "deep/out"],
+                          cwd=work, env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    out = (work / "deep" / "out").resolve()
+    created = [p for p in set(tmp_path.rglob("*")) - before if "__pycache__" not in p.parts]
+    outside = [p for p in created if out not in p.resolve().parents and p.resolve() != out
+               and p.resolve() not in out.parents]
+    assert outside == [], outside
+    rows = pd.read_csv(out / "results.csv")
+    assert set(rows.method) == {"../../escape", "raw"} and set(rows.scenario) == {"..x"}
+    assert (rows.status == "ok").all(), rows[["method", "status", "message"]]

@@ -224,7 +224,10 @@ def read_log(path: str | Path, spec: JointSpec | None = None) -> SensorLog:
     if spec is None:
         spec = JointSpec()
         if len(frame) > 1 and "t" in columns:
-            dt = float(np.median(np.diff(np.asarray(columns["t"], dtype=float))))
+            try:
+                dt = float(np.median(np.diff(np.asarray(columns["t"], dtype=float))))
+            except (TypeError, ValueError):  # a non-numeric t: make_log names the column
+                dt = float("nan")
             if np.isfinite(dt) and dt > 0:
                 spec = dataclasses.replace(spec, fs=round(1.0 / dt, 6))
     return make_log(spec, columns, source=str(path), meta={"source": str(path)})

@@ -141,7 +141,7 @@ def _setup(root: Path) -> dict:
                                        ["pickle.parquet: cannot read as parquet"]),
         "log is a pickle (.csv)": (["run", "--log", "pickle.csv", *out], None, ["pickle.csv"]),
         "log wrong suffix": (["run", "--log", "a-file", *out], None, ["a-file: unsupported log format"]),
-        "calibration log without torque_ref": (["run", "--log", "good.csv", "--calibration", "no-current.csv", *out],
+        "calibration log lacks a column": (["run", "--log", "good.csv", "--calibration", "no-current.csv", *out],
                                                None, ["no-current.csv: missing column(s) current"]),
         # names and plugins
         "unknown method": ([*run[:-1], "rwa", "--scenarios", "creep", *out], None, ["unknown method 'rwa'", "'raw'"]),

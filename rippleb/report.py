@@ -113,6 +113,8 @@ def fmt_interval(mean: float, half: float, digits: int = 3) -> str:
         return "n/a"
     if not np.isfinite(half):
         return f"{mean:.{digits}g}"
+    if half <= 1e-12 * max(1.0, abs(mean)):  # equal values: rounding noise, not spread
+        half = 0.0
     return f"{mean:.{digits}g} ± {half:.2g}"
 
 
@@ -290,8 +292,8 @@ def table_one_sentences(table) -> list[str]:
             f"{name} error: order tracking is {better} than current-based ({r[order]:.3g} vs "
             f"{r[cur]:.3g} Nm, ratio {r['ratio_pct']:.0f} %), {agree} ({r[f'paper_{order}']:g} vs "
             f"{r[f'paper_{cur}']:g} Nm, {r['paper_ratio_pct']:g} %). {judged} "
-            f"Absolute errors: simulated current-based is {r[cur] / r[f'paper_{cur}']:.2g} x the paper's, "
-            f"order tracking {r[order] / r[f'paper_{order}']:.2g} x.")
+            f"Absolute errors: simulated current-based is {r[cur] / r[f'paper_{cur}']:.2f} x the paper's, "
+            f"order tracking {r[order] / r[f'paper_{order}']:.2f} x.")
     return out
 
 

@@ -59,6 +59,11 @@ def test_matrix_cells_are_mean_and_half_width_and_mark_missing_seeds():
     assert "0.5 ± 0 (n=4)" in text
 
 
+def test_equal_values_show_no_spread():
+    mean, half, _ = report.t_interval([7.7] * 20)
+    assert report.fmt_interval(mean, half) == "7.7 ± 0"
+
+
 def test_ranking_says_whether_the_lead_is_resolved():
     rows = [{"method": m, "scenario": "creep", "seed": k, "rms_error_nm": base + 0.01 * k}
             for m, base in (("kalman-ripple", 0.1), ("raw", 1.0), ("lowpass", 1.005)) for k in range(5)]

@@ -437,9 +437,7 @@ def plot_accuracy_vs_cost(frame, out_png) -> Path:
         x, lo, hi = np.percentile(cost, [50, 25, 75])
         kw = style(name, k)
         ax.errorbar([x], [y], xerr=[[x - lo], [hi - x]], yerr=[[half if np.isfinite(half) else 0]] * 2,
-                    fmt="o", ms=7, color=kw["color"], capsize=3)
-        # alternate above/below so that neighbours (the order-tracking family) stay legible
-        ax.annotate(name, (x, y), textcoords="offset points", xytext=(6, 5 if k % 2 else -12), fontsize=8)
+                    fmt="o", ms=7, color=kw["color"], capsize=3, label=name)
     ax.set_xscale("log")
     ax.set_yscale("log")
     n_seeds, n_scen = ok["seed"].nunique(), ok["scenario"].nunique()
@@ -448,6 +446,8 @@ def plot_accuracy_vs_cost(frame, out_png) -> Path:
            title=f"Accuracy against per-tick cost: mean over the {n_scen} scenarios every method "
                  f"finished,\nthen over {n_seeds} seed(s) (bar: 95 % t-interval)")
     ax.grid(alpha=0.3, which="both")
+    # a legend, not labels at the points: the order-tracking family sits too close for text
+    ax.legend(fontsize=8, loc="lower left")
     fig.tight_layout()
     return _save(fig, out_png)
 

@@ -421,12 +421,12 @@ def provenance_markdown(prov: dict) -> str:
             ["run wall time", f"{run['wall_s']:.0f} s" if "wall_s" in run else "not recorded"],
             ["jobs", str(run.get("jobs", "not recorded"))],
             ["seeds", prov["seeds_text"]],
-            ["rippleb", str(run.get("rippleb_version", prov["rows_rippleb_version"]))],
+            ["rippleb", str(run.get("rippleb_version", prov.get("rows_rippleb_version", "not recorded")))],
             ["git commit of the run", _git_text(run)],
-            ["Python", str(run.get("python", prov["rows_python"]))],
+            ["Python", str(run.get("python", prov.get("rows_python", "not recorded")))],
             ["numpy / scipy / pinocchio", " / ".join(str(run.get(k, "not recorded"))
                                                     for k in ("numpy", "scipy", "pinocchio"))],
-            ["CPU", str(run.get("cpu", prov["rows_cpu"]))],
+            ["CPU", str(run.get("cpu", prov.get("rows_cpu", "not recorded")))],
             ["platform", str(run.get("platform", "not recorded"))],
             ["command of this report", _code(rep["command"])],
             ["git commit of this report", _git_text(rep)]]

@@ -257,3 +257,18 @@ def test_report_through_the_cli_on_a_tiny_run(tmp_path, capsys):
         assert f"figures/{name}.png" in readme
         assert _is_png(pub / "figures" / f"{name}.png")
     assert "warning" not in capsys.readouterr().err  # figure signals reproduce the rows of seed 1
+
+
+@pytest.mark.slow
+def test_a_resumed_run_keeps_its_first_command_and_adds_the_resume(tmp_path):
+    run_dir = tmp_path / "run"
+    first = ["run", "--methods", "raw", "--scenarios", "paper-quintic", "--seeds", "1", "--jobs", "1",
+             "--out", str(run_dir), "--no-progress"]
+    assert main(first) == 0
+    again = ["run", "--resume", str(run_dir), "--methods", "raw,lowpass", "--jobs", "1", "--no-progress"]
+    assert main(again) == 0
+    recorded = json.loads((run_dir / "provenance.json").read_text())
+    assert recorded["command"] == "rippleb " + " ".join(first)
+    assert recorded["resumes"] == ["rippleb " + " ".join(again)] and recorded["completed"] is True
+    assert f"`rippleb {' '.join(again)}`" in report.provenance_markdown(
+        {"run": recorded, "report": recorded, "seeds_text": "0 (1 seed)"})

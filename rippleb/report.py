@@ -532,6 +532,26 @@ def _plain(value):
     return value.item() if isinstance(value, np.generic) else value
 
 
+# What the tables can and cannot say; no numbers here, so nothing in it can go stale.
+READING = """## Reading these tables
+
+- Every number comes from the simulator (`docs/physics.md`), not from a real joint. Its
+  ripple is strictly periodic in the wave-generator angle, with amplitudes affine in the
+  load and a small load-dependent phase. That is the very structure `kalman-ripple`
+  identifies on the calibration log of the same device, so its lead here is the best case
+  for model-based cancellation: ripple that drifts with temperature, wear or re-assembly,
+  or harmonics outside its modelled orders, would cost it more than it costs the
+  model-free `order-tracking`, which assumes only that the ripple sits at fixed orders.
+- `order-tracking` switches to the dead zone when no encoder position is crossed within
+  its trigger timeout, chosen on the calibration scenario (`docs/methods/order-tracking.md`).
+  On `creep` the joint is so slow that the time between crossings exceeds that timeout, so
+  the method runs as raw strain minus the stop offset almost throughout and ties `raw`.
+- `delay_ms` is the lag that best correlates estimate and truth. On slowly varying torque
+  (`creep`, `paper-quintic`) the correlation is flat over many lags, so wide intervals
+  there mean an ill-defined lag, not a slow method.
+- Timing columns depend on the machine and its load; compare methods within one run."""
+
+
 def readme_markdown(frame, prov: dict, figures: dict) -> str:
     """``results/README.md``: every number from ``frame`` or ``prov``."""
     counts = frame["status"].value_counts()
@@ -550,6 +570,7 @@ def readme_markdown(frame, prov: dict, figures: dict) -> str:
         f"`(n=k)` marks cells with fewer ok seeds than the run).",
     ]
     parts += [""] + [f"- {line}" for line in headline_sentences(frame)]
+    parts += ["", READING]
     parts += ["", tables_markdown(frame)]
     if figures:
         parts += ["", "## Figures", ""]

@@ -90,7 +90,8 @@ def _add_run(sub) -> None:
                    help="finish an interrupted run: run only the rows missing from DIR/results.csv")
     p.add_argument("--log", type=Path, help="run on a recorded log (.csv or .parquet) instead of scenarios")
     p.add_argument("--calibration", type=Path,
-                   help="with --log: the calibration log (needs torque_ref); default: the log itself")
+                   help="with --log: the calibration log (needs torque_ref); default: the log itself, "
+                        "with a warning, since fitting on the scored log flatters every method")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_run)
 
@@ -197,6 +198,10 @@ def _run(args, start: float) -> int:
         args.out_dir = args.out or runner.default_out_dir()
         frame = runner.run_log(args.log, args.calibration, args.methods, jobs=args.jobs,
                                out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress)
+        if args.calibration is None:
+            print("rippleb: warning: no --calibration: methods are fitted on the scored log "
+                  "itself, which flatters every method; pass a separate calibration recording",
+                  file=sys.stderr)
     elif args.resume is not None:
         config = runner.read_config(args.resume)
         args.out_dir = args.resume

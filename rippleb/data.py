@@ -26,6 +26,7 @@ from typing import Iterator
 import numpy as np
 
 from rippleb.errors import InputError
+from rippleb.files import atomic_path
 
 SENSOR_COLUMNS = ("t", "strain", "encoder", "current")
 TRUTH_COLUMNS = ("torque_true", "torque_ref")
@@ -242,17 +243,9 @@ def write_log(log: SensorLog, path: str | Path) -> Path:
     if suffix not in (".csv", ".parquet"):
         raise InputError(f"{path}: unsupported log format {suffix or '(none)'!r}; use .csv or .parquet")
     frame = pd.DataFrame(log.columns())
-    tmp = path.with_name(f".{path.name}.tmp")
-    try:
+    with atomic_path(path) as tmp:
         if suffix == ".csv":
             frame.to_csv(tmp, index=False, float_format="%.9g")
         else:
             frame.to_parquet(tmp, index=False)
-        tmp.replace(path)
-    except OSError as exc:
-        try:
-            tmp.unlink(missing_ok=True)
-        except OSError:  # e.g. the parent is a regular file: there is no tmp to remove
-            pass
-        raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None
     return path

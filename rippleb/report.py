@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from rippleb.errors import InputError
+from rippleb.files import atomic_path
 
 SUMMARY_COLUMNS = ("rms_error_nm", "max_error_nm", "rms_error_ref_nm", "delay_ms",
                    "restart_max_error_nm", "stopped_rms_error_nm", "us_per_tick_p50", "us_per_tick_p99")
@@ -619,11 +620,8 @@ def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, arg
     prov["figure_seed"] = figure_seed if figures else None
     # A byte copy, not a rewrite: re-printing parsed floats could change their last digit,
     # and tests/test_published.py compares them exactly.
-    try:
-        shutil.copyfile(run_dir / "results.csv", _tmp(out / "results.csv"))
-        os.replace(_tmp(out / "results.csv"), out / "results.csv")
-    except OSError as exc:
-        raise InputError(f"{out / 'results.csv'}: cannot write: {exc.strerror or exc}") from None
+    with atomic_path(out / "results.csv") as tmp:
+        shutil.copyfile(run_dir / "results.csv", tmp)
     _write(out / "provenance.json", json.dumps(prov, indent=1, default=str) + "\n")
     _write(out / "README.md", readme_markdown(frame, prov, drawn))
     return {"readme": out / "README.md", "csv": out / "results.csv", "provenance": out / "provenance.json",
@@ -637,14 +635,6 @@ def _mkdir(path: Path) -> None:
         raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None
 
 
-def _tmp(path: Path) -> Path:
-    return path.with_name(f".{path.name}.tmp")
-
-
 def _write(path: Path, text: str) -> None:
-    tmp = _tmp(path)
-    try:
+    with atomic_path(path) as tmp:
         tmp.write_text(text)
-        os.replace(tmp, path)
-    except OSError as exc:
-        raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None

@@ -13,6 +13,7 @@ import platform
 from pathlib import Path
 
 from rippleb.errors import InputError
+from rippleb.files import atomic_path
 from rippleb.metrics import METRIC_COLUMNS
 
 KEY_COLUMNS = ("method", "scenario", "seed")
@@ -84,12 +85,8 @@ class ResultsFile:
         return frame.reindex(columns=list(COLUMNS) + extra)
 
     def _write(self) -> None:
-        tmp = self.path.with_name(f".{self.path.name}.tmp")
-        try:
+        with atomic_path(self.path) as tmp:
             self.frame().to_csv(tmp, index=False)
-            os.replace(tmp, self.path)
-        except OSError as exc:
-            raise InputError(f"{self.path}: cannot write results: {exc.strerror or exc}") from None
 
 
 def read_rows(path: Path) -> list[dict]:

@@ -40,6 +40,7 @@ import numpy as np
 
 from rippleb.data import JointSpec, SensorLog
 from rippleb.errors import InputError
+from rippleb.files import atomic_path
 from rippleb.metrics import Truth, score, tick_stats
 from rippleb.pool import Pool
 from rippleb.registry import Registry, one_line
@@ -318,9 +319,8 @@ def fit_and_save(cls, calibration: SensorLog, path: Path) -> dict:
         blob = pickle.dumps(method, protocol=pickle.HIGHEST_PROTOCOL)
     except Exception:  # not picklable (a lambda, a handle): its rows fit it themselves
         return {**result, "pickled": False}
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_bytes(blob)
-    tmp.replace(path)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(blob)
     return {**result, "pickled": True}
 
 
@@ -423,9 +423,8 @@ def save_case(path: Path, log: SensorLog, truth: Truth) -> None:
     arrays.update({name: getattr(truth, name) for name in _ARRAYS})
     arrays["spec"] = np.array(json.dumps(asdict(log.spec)))
     arrays["meta"] = np.array(json.dumps(log.meta, default=str))
-    tmp = path.with_name(f".{path.name}.tmp.npz")
-    np.savez(tmp, **arrays)
-    tmp.replace(path)
+    with atomic_path(path) as tmp:
+        np.savez(tmp, **arrays)
 
 
 def load_case(path: Path) -> tuple[SensorLog, Truth]:

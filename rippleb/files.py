@@ -1,0 +1,28 @@
+"""Atomic file replacement, shared by every writer of rippleb."""
+
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+from typing import Iterator
+
+from rippleb.errors import InputError
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; on success, move it over ``path`` at once.
+
+    A reader, a SIGINT or a ``kill -9`` therefore sees the old file or the new one,
+    never half of one. The temporary name keeps ``path``'s suffix (``np.savez`` adds
+    ``.npz`` otherwise). An ``OSError`` becomes an :class:`InputError` naming ``path``.
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp{path.suffix}")
+    try:
+        yield tmp
+        tmp.replace(path)
+    except OSError as exc:
+        with contextlib.suppress(OSError):  # e.g. the parent is a regular file: no tmp exists
+            tmp.unlink(missing_ok=True)
+        raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None

@@ -29,8 +29,11 @@ from rippleb.errors import InputError
 from rippleb.files import atomic_path
 
 SENSOR_COLUMNS = ("t", "strain", "encoder", "current")
+#: Optional sensor columns: ``index`` is 1 on samples where the encoder's once-per-revolution
+#: index pulse is seen, else 0 (simulated logs have it; recorded logs may).
+OPTIONAL_SENSOR_COLUMNS = ("index",)
 TRUTH_COLUMNS = ("torque_true", "torque_ref")
-LOG_COLUMNS = SENSOR_COLUMNS + TRUTH_COLUMNS
+LOG_COLUMNS = SENSOR_COLUMNS + OPTIONAL_SENSOR_COLUMNS + TRUTH_COLUMNS
 
 
 @dataclass(frozen=True)
@@ -93,13 +96,15 @@ class JointSpec:
 class SensorBlock:
     """The samples of one control tick: equal-length arrays, oldest first.
 
-    ``t`` [s], ``strain`` [V], ``encoder`` [integer counts], ``current`` [A].
+    ``t`` [s], ``strain`` [V], ``encoder`` [integer counts], ``current`` [A];
+    ``index`` [0/1 per sample, the encoder's index pulse] or None when the log has none.
     """
 
     t: np.ndarray
     strain: np.ndarray
     encoder: np.ndarray
     current: np.ndarray
+    index: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t)
@@ -109,6 +114,7 @@ class SensorBlock:
 class SensorLog:
     """A recording of one joint, equal-length columns sampled at ``spec.fs``.
 
+    ``index`` (the encoder's index pulse, 0/1) is optional, as on a recorded log.
     ``torque_true`` is present only on simulated logs and never reaches a method;
     ``torque_ref`` reaches a method only in the calibration log.
     ``meta`` holds provenance (scenario, seed, run) and is free-form.
@@ -119,6 +125,7 @@ class SensorLog:
     strain: np.ndarray
     encoder: np.ndarray
     current: np.ndarray
+    index: np.ndarray | None = None
     torque_true: np.ndarray | None = None
     torque_ref: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
@@ -134,13 +141,13 @@ class SensorLog:
         size = size or self.spec.block_size
         for start in range(0, len(self.t), size):
             stop = start + size
-            yield SensorBlock(self.t[start:stop], self.strain[start:stop],
-                              self.encoder[start:stop], self.current[start:stop])
+            yield self.block(start, stop)
 
     def block(self, start: int, stop: int) -> SensorBlock:
         """The samples ``start:stop`` as one block."""
+        index = None if self.index is None else self.index[start:stop]
         return SensorBlock(self.t[start:stop], self.strain[start:stop],
-                           self.encoder[start:stop], self.current[start:stop])
+                           self.encoder[start:stop], self.current[start:stop], index)
 
     def for_method(self, *, keep_ref: bool) -> "SensorLog":
         """A copy a method may see: no ``torque_true``; ``torque_ref`` only if ``keep_ref``."""
@@ -194,6 +201,10 @@ def make_log(spec: JointSpec, columns: dict, *, source: str = "log", meta: dict 
     if not np.array_equal(encoder, np.round(encoder)):
         raise InputError(f"{source}: column encoder must hold integer counts")
     arrays["encoder"] = encoder.astype(np.int64)
+    if "index" in arrays:
+        if not np.isin(arrays["index"], (0.0, 1.0)).all():
+            raise InputError(f"{source}: column index must hold 0 or 1 (the encoder's index pulse)")
+        arrays["index"] = arrays["index"].astype(np.int8)
     return SensorLog(spec=spec, meta=dict(meta or {}), **arrays)
 
 

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rippleb.conditions import DEFAULT_CONDITION, check_condition
 from rippleb.data import JointSpec, SensorLog
 from rippleb.errors import InputError
 from rippleb.scenario import Scenario, load_scenario
@@ -247,10 +248,17 @@ def quantise(values: np.ndarray, full_scale: float, bits: int) -> np.ndarray:
     return codes * step
 
 
-def simulate(scenario: Scenario | str, seed: int = 0) -> Simulation:
-    """Simulate ``scenario`` (object, built-in name or TOML path) on the device of ``seed``."""
+def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_CONDITION) -> Simulation:
+    """Simulate ``scenario`` (object, built-in name or TOML path) on the device of ``seed``.
+
+    ``condition`` (see :mod:`rippleb.conditions`) says what happened to the device since
+    its calibration session; ``same-session`` is the device as calibrated.
+    """
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     seed = _check_seed(seed)
+    condition = check_condition(condition)
+    if condition != DEFAULT_CONDITION:
+        raise NotImplementedError(f"condition {condition!r} is not simulated yet")
     spec: JointSpec = sc.spec
     device = Device.from_seed(seed)
     noise = np.random.default_rng(np.random.SeedSequence([seed, stable_hash(sc.name)]))

@@ -20,12 +20,12 @@ friction opposing the motor velocity, and cogging.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from rippleb.conditions import DEFAULT_CONDITION, check_condition
+from rippleb import conditions
+from rippleb.conditions import DEFAULT_CONDITION, check_condition, stable_hash
 from rippleb.data import JointSpec, SensorLog
 from rippleb.errors import InputError
 from rippleb.scenario import Scenario, load_scenario
@@ -68,11 +68,6 @@ COGGING_ORDER = 24           # periods per motor revolution (8 poles, 12 slots)
 # --- output (cross-roller) bearing friction, Nm on the joint side ---
 OUTPUT_FRICTION = dict(coulomb=0.3, viscous=0.8)
 OUTPUT_SIGN_SMOOTHING = 0.005   # rad/s at the joint: bearing pre-sliding; estimate
-
-
-def stable_hash(text: str) -> int:
-    """A 64-bit hash of ``text`` that is the same in every process (unlike ``hash``)."""
-    return int.from_bytes(hashlib.sha256(text.encode()).digest()[:8], "little")
 
 
 def _check_seed(seed) -> int:
@@ -157,6 +152,21 @@ class Device:
             current_offset=0.02 * rng.standard_normal(),
         )
 
+    def regauged(self, rng: np.random.Generator) -> "Device":
+        """This device with its gauge error terms drawn anew from ``rng``, from the same
+        population as :meth:`from_seed` (ripple amplitudes, phases, load phase shifts and
+        the gain error); friction, encoder and bridge zero are kept."""
+        k = len(self.ripple_orders)
+        spread = lambda size: np.exp(RIPPLE_SPREAD * rng.standard_normal(size))  # noqa: E731
+        return dataclasses.replace(
+            self,
+            gain=STRAIN_GAIN * (1.0 + 0.05 * rng.standard_normal()),
+            ripple_base=tuple(np.array([b for _, b, _ in RIPPLE_ORDERS]) * spread(k)),
+            ripple_load=tuple(np.array([s for _, _, s in RIPPLE_ORDERS]) * spread(k)),
+            ripple_phase=tuple(rng.uniform(0, 2 * np.pi, k)),
+            ripple_phase_shift=tuple(RIPPLE_PHASE_SHIFT * rng.standard_normal(k)),
+        )
+
     def ripple(self, wave_angle: np.ndarray, torque: np.ndarray) -> np.ndarray:
         """Ripple in torque units [Nm]: a function of wave-generator angle and load only."""
         load = np.abs(torque)
@@ -206,8 +216,9 @@ class Simulation:
     Attributes
     ----------
     log
-        :class:`~rippleb.data.SensorLog` with all six columns;
-        ``meta = {"scenario": name, "seed": seed}``.
+        :class:`~rippleb.data.SensorLog` with all seven columns;
+        ``meta = {"scenario": name, "seed": seed, "condition": condition}``; the log also
+        has the ``index`` column (encoder index pulse).
     moving
         Per sample: the commanded joint velocity is non-zero.
     wave_angle
@@ -252,15 +263,18 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     """Simulate ``scenario`` (object, built-in name or TOML path) on the device of ``seed``.
 
     ``condition`` (see :mod:`rippleb.conditions`) says what happened to the device since
-    its calibration session; ``same-session`` is the device as calibrated.
+    its calibration session; ``same-session`` is the device as calibrated. A scenario with
+    ``scored = false`` (``calibration``) is that calibration session, the same under
+    every condition.
     """
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     seed = _check_seed(seed)
     condition = check_condition(condition)
-    if condition != DEFAULT_CONDITION:
-        raise NotImplementedError(f"condition {condition!r} is not simulated yet")
     spec: JointSpec = sc.spec
-    device = Device.from_seed(seed)
+    session = conditions.session(Device.from_seed(seed), sc, condition)
+    device = session.device
+    if session.temperature_c != sc.temperature_c:
+        sc = dataclasses.replace(sc, temperature_c=session.temperature_c)
     noise = np.random.default_rng(np.random.SeedSequence([seed, stable_hash(sc.name)]))
 
     n = max(2, int(round(sc.duration * spec.fs)))
@@ -281,18 +295,23 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
 
     strain = _strain(device, sc, t, theta_m, tau_true, noise)
     current = _current(device, sc, spec, theta_m, w_m, a_m, tau_true, noise)
-    encoder = np.floor(theta_m / (2 * np.pi) * spec.counts_per_rev).astype(np.int64)
-    meta = {"scenario": sc.name, "seed": seed}
+    absolute = np.floor(theta_m / (2 * np.pi) * spec.counts_per_rev).astype(np.int64)
+    index = conditions.index_pulses(absolute, conditions.index_count(seed, spec.counts_per_rev),
+                                    spec.counts_per_rev)
+    # An incremental counter counts from wherever it stood when the log started.
+    encoder = absolute if session.counter_start is None else absolute - absolute[0] + session.counter_start
+    meta = {"scenario": sc.name, "seed": seed, "condition": condition}
     if sc.faults.active:
         # Own generator: a faulty scenario's healthy signals stay those of the same
         # scenario without faults, and scenarios without faults are untouched.
         fault_rng = np.random.default_rng(
             np.random.SeedSequence([seed, stable_hash(sc.name), stable_hash("faults")]))
         encoder = _encoder_faults(encoder, sc.faults, spec.fs, fault_rng)
-        strain, encoder, current = _dropouts((strain, encoder, current), sc.faults, spec.fs, fault_rng)
+        strain, encoder, current, index = _dropouts((strain, encoder, current, index), sc.faults,
+                                                    spec.fs, fault_rng)
         meta["faults"] = {k: v for k, v in dataclasses.asdict(sc.faults).items() if v}
 
-    log = SensorLog(spec=spec, t=t, strain=strain, encoder=encoder, current=current,
+    log = SensorLog(spec=spec, t=t, strain=strain, encoder=encoder, current=current, index=index,
                     torque_true=tau_true, torque_ref=tau_ref, meta=meta)
     start, stop = sc.evaluation
     return Simulation(log=log, moving=np.abs(qd) > 1e-12, wave_angle=theta_m,
@@ -358,6 +377,9 @@ def _dropouts(channels, faults, fs: float, rng):
 
     Dropouts start as a Poisson process of ``dropout_rate`` per second and last
     ``dropout_length`` seconds (at least one sample). The first sample is always good.
+    The last channel is the index pulse: an event, not a level, so a filled frame
+    carries 0 (a pulse inside a lost frame is lost with it, repeating it would invent
+    passes of the index mark).
     """
     if not faults.dropout_rate:
         return channels
@@ -370,4 +392,5 @@ def _dropouts(channels, faults, fs: float, rng):
     dropped[0] = False
     index = np.arange(n)
     last_good = np.maximum.accumulate(np.where(dropped, 0, index))
-    return tuple(channel[last_good] for channel in channels)
+    *levels, pulses = channels
+    return (*(channel[last_good] for channel in levels), np.where(dropped, 0, pulses).astype(np.int8))

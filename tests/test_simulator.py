@@ -25,14 +25,16 @@ def _same(a: Simulation, b: Simulation) -> bool:
         for k in cols_a)
 
 
-def test_log_has_the_six_columns_on_the_fs_grid():
+def test_log_has_the_seven_columns_on_the_fs_grid():
     sim = simulate("paper-quintic", 0)
     log = sim.log
-    assert set(log.columns()) == {"t", "strain", "encoder", "current", "torque_true", "torque_ref"}
+    assert set(log.columns()) == {"t", "strain", "encoder", "current", "index", "torque_true",
+                                  "torque_ref"}
+    assert log.index.dtype == np.int8 and set(np.unique(log.index)) == {0, 1}
     assert log.encoder.dtype == np.int64
     assert len(log) == round(4.0 * log.spec.fs)
     assert np.allclose(np.diff(log.t), 1 / log.spec.fs)
-    assert log.meta == {"scenario": "paper-quintic", "seed": 0}
+    assert log.meta == {"scenario": "paper-quintic", "seed": 0, "condition": "same-session"}
     for arr in (sim.moving, sim.wave_angle, sim.joint_velocity, sim.eval_mask):
         assert len(arr) == len(log)
     assert sim.moving.dtype == bool and sim.eval_mask.dtype == bool

@@ -1,0 +1,82 @@
+"""Mean RMS error per method under each deployment condition, straight from the simulator.
+
+For each seed every method is fitted once on that seed's ``calibration`` log (the first
+session, the same under every condition) and streamed over each scenario simulated under
+each condition; the table gives the mean ``rms_error_nm`` over the seeds. Use it to see how
+a method copes with a condition without the runner.
+
+Run: ``python benchmarks/condition_table.py [--seeds 900-904] [--scenarios paper-quintic,stop-restart]
+[--methods ...] [--calibration calibration]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+
+import numpy as np
+
+from rippleb.conditions import CONDITIONS
+from rippleb.metrics import Truth, score
+from rippleb.registry import Registry
+from rippleb.simulator import simulate
+from rippleb.streaming import prepare_blocks, stream
+
+DEFAULT_METHODS = "raw,lowpass,current-based,switched-notch,order-tracking,kalman-ripple"
+
+
+def seeds_of(text: str) -> list[int]:
+    """``900-904`` or ``1,2,3``."""
+    if "-" in text:
+        lo, hi = (int(v) for v in text.split("-"))
+        return list(range(lo, hi + 1))
+    return [int(v) for v in text.split(",")]
+
+
+def table(methods, scenarios, conditions, seeds, calibration="calibration") -> dict:
+    """``{(method, scenario, condition): [rms_error_nm per seed]}``."""
+    registry = Registry.discover()
+    out: dict = {}
+    for seed in seeds:
+        cal = simulate(calibration, seed).log.for_method(keep_ref=True)
+        fitted = {}
+        for name in methods:
+            method = registry.get(name).load()()
+            method.fit(cal)
+            fitted[name] = method
+        for scenario in scenarios:
+            for condition in conditions:
+                sim = simulate(scenario, seed, condition)
+                visible = sim.log.for_method(keep_ref=False)
+                blocks = prepare_blocks(visible)
+                for name in methods:
+                    method = copy.deepcopy(fitted[name])
+                    method.reset(visible.spec)
+                    estimate, _ = stream(method.step, blocks, len(visible))
+                    rms = score(estimate, Truth.from_simulation(sim))["rms_error_nm"]
+                    out.setdefault((name, scenario, condition), []).append(rms)
+    return out
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", default="900-904")
+    parser.add_argument("--scenarios", default="paper-quintic,stop-restart")
+    parser.add_argument("--methods", default=DEFAULT_METHODS)
+    parser.add_argument("--conditions", default=",".join(CONDITIONS))
+    parser.add_argument("--calibration", default="calibration")
+    args = parser.parse_args(argv)
+    methods, scenarios = args.methods.split(","), args.scenarios.split(",")
+    conditions = args.conditions.split(",")
+    result = table(methods, scenarios, conditions, seeds_of(args.seeds), args.calibration)
+    for scenario in scenarios:
+        print(f"\n{scenario}: mean rms_error_nm over seeds {args.seeds}\n")
+        print("| method | " + " | ".join(conditions) + " |")
+        print("|---" * (len(conditions) + 1) + "|")
+        for name in methods:
+            cells = [f"{np.mean(result[name, scenario, c]):.3f}" for c in conditions]
+            print(f"| {name} | " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    main()

@@ -23,6 +23,16 @@ encoder sample. A ripple faster than the tick rate is averaged out of both ``y``
 ``H`` alike; it is not aliased. See ``docs/methods/kalman-ripple.md`` for the rates in
 the scenarios.
 
+Re-homing: the ripple map is a function of the absolute wave-generator angle, but an
+incremental encoder counts from wherever it stood at power-on. When the logs have an
+``index`` column (the encoder's once-per-revolution index pulse), :meth:`KalmanRipple.fit`
+finds the count of the index mark in the calibration log's frame, and every index pulse of
+a scored run re-homes the count into that frame (:meth:`KalmanRipple.home`): at the first
+pulse after a power cycle the map is turned to the new count, and later pulses correct
+missed or spurious counts. Until the first pulse of a run the count is taken as it
+comes, as without an index column: the right frame in the calibration session's power-on,
+a wrong one after a power cycle.
+
 Ticks are cut on absolute sample indices (every ``tick`` samples since :meth:`reset`),
 not on block boundaries, so the output does not depend on how the stream is cut. Each
 sample's output is the posterior torque of the latest complete tick (held), extrapolated
@@ -46,6 +56,28 @@ def phasor_table(counts_per_rev: int) -> np.ndarray:
     bits whatever the block cutting, and is faster than ``cos``/``sin``.
     """
     return np.exp(2j * np.pi * np.arange(counts_per_rev) / counts_per_rev)
+
+
+def index_mark(encoder: np.ndarray, index, counts_per_rev: int):
+    """Count (mod ``counts_per_rev``) of the encoder's index mark in this log's frame, or
+    None without index pulses.
+
+    The mark is the count edge crossed at a pulse: ``max`` of the counts of the pulse
+    sample and the one before, when they are one count apart. Pulses crossed with skipped
+    counts are ambiguous and left out; the most common value wins (a count error in the
+    log would otherwise move it).
+    """
+    if index is None:
+        return None
+    pulses = np.flatnonzero(index)
+    pulses = pulses[pulses > 0]
+    steps = encoder[pulses] - encoder[pulses - 1]
+    clean = pulses[np.abs(steps) == 1]
+    if len(clean) == 0:
+        return None
+    marks = np.maximum(encoder[clean], encoder[clean - 1]) % counts_per_rev
+    values, counts = np.unique(marks, return_counts=True)
+    return int(values[np.argmax(counts)])
 
 
 def tick_regressors(encoder: np.ndarray, orders: np.ndarray, table: np.ndarray) -> np.ndarray:
@@ -227,6 +259,7 @@ class KalmanRipple(Method):
         self.r_ = float(max(np.var(np.diff(resid)) / 2.0, 1e-12))
         self.residual_rms_ = float(np.std(resid))
         self._fit_noise(y, tau, phi, self._turns(encoder, encoder[0, 0]))
+        self.index_mark_ = index_mark(calibration.encoder, calibration.index, self.spec_.counts_per_rev)
 
     def _fit_map(self, strain, tau, phi):
         """Least-squares gain, offset and ripple map (step 1 of :meth:`fit`)."""
@@ -281,12 +314,16 @@ class KalmanRipple(Method):
         self.last_count_ = None  # encoder count at the end of the previous tick
         self.have_estimate_ = False
         self.since_tick_ = 0  # samples since the end of the last tick
+        self.shift_ = 0       # log count minus calibration-frame count
+        self.homed_ = False   # an index pulse has been seen in this run
+        self.last_raw_ = None  # last encoder count as logged
 
     def step(self, block: SensorBlock) -> np.ndarray:
         """One torque estimate [Nm] per sample: the latest tick's posterior, held."""
         first = len(self.pending_strain_)  # position of block[0] in the joined arrays
+        counts = self.home(block)
         strain = np.concatenate([self.pending_strain_, block.strain])
-        encoder = np.concatenate([self.pending_encoder_, block.encoder])
+        encoder = np.concatenate([self.pending_encoder_, counts])
         D = self.tick_
         done = len(strain) // D
         out = np.empty(len(block))
@@ -303,7 +340,7 @@ class KalmanRipple(Method):
             q = self.q_tick_ + turns[:, None] * self.q_turn_
         for j in range(done):
             last = (j + 1) * D - 1 - first  # block index of the sample that ends tick j
-            self._fill(out, block, cursor, last)
+            self._fill(out, block, counts, cursor, last)
             # linearise the |tau| term of the map at the sign of the predicted torque
             prior = self.x_[0] + self.F_[0, 1] * self.x_[1] if self.torque_rate else self.x_[0]
             H[j, 0] += load[j] if prior > 0 else -load[j] if prior < 0 else 0.0
@@ -311,13 +348,59 @@ class KalmanRipple(Method):
             self.have_estimate_ = True
             self.since_tick_ = 0
             cursor = last
-        self._fill(out, block, cursor, len(block))
+        self._fill(out, block, counts, cursor, len(block))
         self.pending_strain_ = strain[done * D:]
         self.pending_encoder_ = encoder[done * D:]
         return out
 
-    def _fill(self, out, block, start, stop):
-        """Write the current estimate to ``out[start:stop]``.
+    def home(self, block: SensorBlock) -> np.ndarray:
+        """The block's encoder counts in the calibration log's frame, re-homed on its
+        index pulses.
+
+        At a pulse the mark lies between the counts of the pulse sample and the sample
+        before it. One count apart (below fs counts/s) that fixes the frame exactly; when
+        the DAQ skipped counts it fixes it to the skipped range, and the current frame is
+        kept if the mark falls inside that range, else the middle of the range is taken.
+        """
+        encoder = block.encoder
+        pulses = None if block.index is None or getattr(self, "index_mark_", None) is None \
+            else np.flatnonzero(block.index)
+        if pulses is None or len(pulses) == 0:
+            if len(encoder):
+                self.last_raw_ = encoder[-1]
+            return encoder - self.shift_ if self.shift_ else encoder
+        shift = np.full(len(encoder), self.shift_, dtype=np.int64)
+        n = int(self.spec_.counts_per_rev)
+        previous = self.last_raw_
+        for k in pulses:
+            before = encoder[k - 1] if k else (encoder[k] if previous is None else previous)
+            lo, hi = sorted((int(before), int(encoder[k])))
+            lo = min(lo + 1, hi)            # the mark sits on a count edge in (lo - 1, hi]
+            mark = self.index_mark_ + self.shift_
+            if not (self.homed_ and (mark - lo) % n <= hi - lo):
+                new = (lo + (hi - lo) // 2 - self.index_mark_) % n
+                self._rehome(new)
+            shift[k:] = self.shift_
+        self.last_raw_ = encoder[-1]
+        return encoder - shift
+
+    def _rehome(self, new_shift: int) -> None:
+        """Move to a new count frame. At the first pulse of a run after a power cycle the
+        ripple estimate gathered in the wrong frame is dropped and the filter starts again
+        from the calibrated map; later small corrections keep the state."""
+        if not self.homed_ and new_shift != self.shift_:
+            x0, P0 = self._initial_state()
+            m = self.n_torque_
+            self.x_[m:] = x0[m:]
+            self.P_[m:, :] = 0.0
+            self.P_[:, m:] = 0.0
+            self.P_[m:, m:] = P0[m:, m:]
+        self.shift_ = int(new_shift)
+        self.homed_ = True
+
+    def _fill(self, out, block, counts, start, stop):
+        """Write the current estimate to ``out[start:stop]`` (``counts``: the block's
+        encoder in the calibration frame).
 
         The sample that ends a tick already gets that tick's posterior: the tick uses
         only samples up to and including it.
@@ -326,7 +409,7 @@ class KalmanRipple(Method):
             return
         if not self.have_estimate_:
             # before the first tick ends: strain in Nm minus the no-load ripple, per sample
-            phase = self.table_[(block.encoder[start:stop, None] * self.orders_) % len(self.table_)]
+            phase = self.table_[(counts[start:stop, None] * self.orders_) % len(self.table_)]
             ripple = phase.real @ self.c0_[0::2] + phase.imag @ self.c0_[1::2]
             out[start:stop] = self.gain_ * block.strain[start:stop] + self.offset_ - ripple
             return

@@ -376,10 +376,9 @@ class KalmanRipple(Method):
             before = encoder[k - 1] if k else (encoder[k] if previous is None else previous)
             lo, hi = sorted((int(before), int(encoder[k])))
             lo = min(lo + 1, hi)            # the mark sits on a count edge in (lo - 1, hi]
-            mark = self.index_mark_ + self.shift_
-            if not (self.homed_ and (mark - lo) % n <= hi - lo):
-                new = (lo + (hi - lo) // 2 - self.index_mark_) % n
-                self._rehome(new)
+            if (self.index_mark_ + self.shift_ - lo) % n > hi - lo:   # the frame is off
+                self._rehome((lo + (hi - lo) // 2 - self.index_mark_) % n)
+            self.homed_ = True
             shift[k:] = self.shift_
         self.last_raw_ = encoder[-1]
         return encoder - shift
@@ -388,7 +387,7 @@ class KalmanRipple(Method):
         """Move to a new count frame. At the first pulse of a run after a power cycle the
         ripple estimate gathered in the wrong frame is dropped and the filter starts again
         from the calibrated map; later small corrections keep the state."""
-        if not self.homed_ and new_shift != self.shift_:
+        if not self.homed_:
             x0, P0 = self._initial_state()
             m = self.n_torque_
             self.x_[m:] = x0[m:]
@@ -396,7 +395,6 @@ class KalmanRipple(Method):
             self.P_[:, m:] = 0.0
             self.P_[m:, m:] = P0[m:, m:]
         self.shift_ = int(new_shift)
-        self.homed_ = True
 
     def _fill(self, out, block, counts, start, stop):
         """Write the current estimate to ``out[start:stop]`` (``counts``: the block's

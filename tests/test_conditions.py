@@ -282,3 +282,22 @@ def test_kalman_ripple_re_homes_on_the_index_after_a_power_cycle():
     _, est_a = _rms(method, None, same)
     _, est_b = _rms(method, None, same, keep_index=False)
     assert np.array_equal(est_a, est_b)
+
+
+def test_dropouts_lose_index_pulses_instead_of_repeating_them():
+    faulty = scenario_from_dict({
+        "robot": {"posture": {"elbow_joint": 1.5}},
+        "trajectory": {"start": -2.0, "segment": [
+            {"kind": "ramp", "velocity": 0.3, "duration": 0.2},
+            {"kind": "cruise", "duration": 1.0}]},
+        "faults": {"dropout_rate": 200.0, "dropout_length": 0.004},
+    }, name="cruise")
+    healthy, broken = simulate(CRUISE, 6).log, simulate(faulty, 6).log
+    filled = np.concatenate(([False], np.diff(broken.t) > 0)) & np.concatenate(
+        ([False], (broken.strain[1:] == broken.strain[:-1]) & (broken.encoder[1:] == broken.encoder[:-1])))
+    assert filled.sum() > 100
+    assert not broken.index[filled].any()
+    # every pulse left is a pulse of the healthy log (same trajectory over the first 1.2 s)
+    n = len(broken)
+    assert np.all(healthy.index[:n][broken.index == 1] == 1)
+    assert 0 < broken.index.sum() <= healthy.index[:n].sum()

@@ -126,8 +126,9 @@ def select_conditions(conditions) -> list[str]:
 
 
 def check_trajectory(scenario, max_speed: float | None = None) -> None:
-    """Refuse a scenario whose posture or trajectory is not finite, or whose joint speed
-    exceeds ``max_speed`` [rad/s] (the joint's URDF velocity limit), with one line."""
+    """Refuse a scenario whose posture or trajectory is not finite, that leaves the
+    joint's position limits, or whose joint speed exceeds ``max_speed`` [rad/s] (the
+    joint's URDF velocity limit), with one line."""
     for joint, value in scenario.posture:
         if not math.isfinite(value):
             raise InputError(f"{scenario.path}: posture: {joint} = {value} is not a finite angle")
@@ -136,6 +137,7 @@ def check_trajectory(scenario, max_speed: float | None = None) -> None:
     for name, values in (("position", q), ("velocity", qd), ("acceleration", qdd)):
         if not np.isfinite(values).all():
             raise InputError(f"{scenario.path}: trajectory: the joint {name} is not finite")
+    scenario.check_limits()
     peak = float(np.abs(qd).max())
     if max_speed is not None and peak > max_speed:
         raise InputError(f"{scenario.path}: trajectory: asks {peak:.4g} rad/s at the joint, beyond its "

@@ -214,7 +214,6 @@ def check_scenario(scenario) -> None:
     model = arm.load_model(scenario.robot)
     joint = model.joints[model.getJointId(scenario.joint)]
     check_trajectory(scenario, float(model.velocityLimit[joint.idx_v]))
-    scenario.check_limits()
 
 
 def check_recording(log: SensorLog, name: str) -> None:

@@ -91,7 +91,9 @@ def _add_list(sub) -> None:
                        description="List every method with its origin (builtin, plugin, or broken "
                                    "with its import error), every built-in scenario and every "
                                    "deployment condition. Plugins are imported in a child process, "
-                                   f"each under a {PLUGIN_IMPORT_TIMEOUT_S:g} s timeout.")
+                                   "each under a timeout.")
+    p.add_argument("--import-timeout", type=float, default=PLUGIN_IMPORT_TIMEOUT_S, metavar="S",
+                   help=f"seconds a plugin may take to import (default {PLUGIN_IMPORT_TIMEOUT_S:g})")
     p.set_defaults(func=cmd_list)
 
 
@@ -169,7 +171,8 @@ def cmd_list(args) -> int:
     from rippleb.conditions import CONDITIONS
 
     registry = Registry.discover()
-    errors = probe_plugins(registry, PLUGIN_IMPORT_TIMEOUT_S)
+    timeout = _limit("--import-timeout", args.import_timeout) or None
+    errors = probe_plugins(registry, timeout)
     print("methods:")
     for name in registry.names():
         entry = registry.entries[name]
@@ -217,7 +220,7 @@ def probe_plugins(registry, timeout: float) -> dict[str, str]:
                 errors[fin.key] = fin.value.split("is broken: ", 1)[-1] if PluginError.__name__ in fin.value \
                     else fin.value
             elif fin.kind == "timeout":
-                errors[fin.key] = f"TimeoutError: import took longer than {timeout:g} s"
+                errors[fin.key] = f"TimeoutError: import took longer than {timeout:g} s (--import-timeout)"
             elif fin.kind != "done":
                 errors[fin.key] = f"import ended the process (exit code {fin.value})"
     return errors

@@ -253,7 +253,7 @@ def test_a_running_directory_is_locked_and_an_interrupted_one_resumable(site, tm
     assert refused.returncode == 2 and f"{out}: not empty" in refused.stderr
     assert f"--resume {out}" in refused.stderr
     assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before   # nothing replaced
-    resumed = subprocess.run(args[:3] + ["--resume", str(out), "--no-progress"], capture_output=True,
+    resumed = subprocess.run(args[:4] + ["--resume", str(out), "--no-progress"], capture_output=True,
                              text=True, timeout=300, env=env)
     assert resumed.returncode == 0, resumed.stderr
     rows = pd.read_csv(out / "results.csv")

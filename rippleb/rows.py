@@ -132,7 +132,9 @@ def check_trajectory(scenario, max_speed: float | None = None) -> None:
     for joint, value in scenario.posture:
         if not math.isfinite(value):
             raise InputError(f"{scenario.path}: posture: {joint} = {value} is not a finite angle")
-    t = np.linspace(0.0, scenario.duration, max(2, int(scenario.duration * 200) + 1))
+    # Sampled densely per segment, so a short, fast move is not stepped over.
+    t = np.concatenate([np.linspace(seg.t0, min(seg.t1, scenario.duration), 65)
+                        for seg in scenario.segments if seg.t0 <= scenario.duration])
     q, qd, qdd = scenario.trajectory(t)
     for name, values in (("position", q), ("velocity", qd), ("acceleration", qdd)):
         if not np.isfinite(values).all():

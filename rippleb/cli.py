@@ -10,13 +10,17 @@ finished rows are.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import math
 import os
 import sys
 import time
+import warnings
 from pathlib import Path
 
 from rippleb.errors import InputError, RipplebError
 
+PLUGIN_IMPORT_TIMEOUT_S = 20.0
 EPILOG = "Run 'rippleb COMMAND --help' for the options of one command."
 
 
@@ -27,17 +31,43 @@ def main(argv: list[str] | None = None) -> int:
     # The exact command line, recorded by `run` in DIR/provenance.json and by `report`.
     args.argv = list(sys.argv[1:] if argv is None else argv)
     try:
-        return args.func(args) or 0
+        with _warnings_as_lines():
+            return args.func(args) or 0
     except RipplebError as exc:
         if args.debug:
             raise
         print(f"rippleb: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        where = getattr(args, "out_dir", None)
-        kept = f"; finished rows are in {where / 'results.csv'}" if where else ""
-        print(f"rippleb: interrupted{kept}", file=sys.stderr)
+        print(f"rippleb: interrupted{_what_was_kept(getattr(args, 'out_dir', None) if getattr(args, 'started', False) else None)}", file=sys.stderr)
         return 130
+
+
+def _what_was_kept(out_dir: Path | None) -> str:
+    """Name what an interrupted run left on disk, and how to finish it."""
+    if out_dir is None or not (out_dir / "run.json").is_file():
+        return ""
+    results = out_dir / "results.csv"
+    try:
+        done = max(0, len(results.read_text().splitlines()) - 1) if results.is_file() else 0
+    except OSError:
+        done = 0
+    kept = (f"{done} finished row(s) are in {results}" if done
+            else f"no row had finished; the selection is in {out_dir / 'run.json'}")
+    return f"; {kept}; finish the run with: rippleb run --resume {out_dir}"
+
+
+@contextlib.contextmanager
+def _warnings_as_lines():
+    """Show rippleb's warnings as one ``rippleb: warning: ...`` line each."""
+    from rippleb.results import RunWarning
+
+    def show(message, category, *args, **kwargs):
+        print(f"rippleb: warning: {message}", file=sys.stderr)
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", RunWarning)
+        warnings.showwarning = show
+        yield
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -57,9 +87,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_list(sub) -> None:
-    p = sub.add_parser("list", help="list methods (built-in, plugin, broken) and scenarios",
+    p = sub.add_parser("list", help="list methods (built-in, plugin, broken), scenarios and conditions",
                        description="List every method with its origin (builtin, plugin, or broken "
-                                   "with its import error) and every built-in scenario.")
+                                   "with its import error), every built-in scenario and every "
+                                   "deployment condition. Plugins are imported in a child process, "
+                                   "each under a timeout.")
+    p.add_argument("--import-timeout", type=float, default=PLUGIN_IMPORT_TIMEOUT_S, metavar="S",
+                   help=f"seconds a plugin may take to import (default {PLUGIN_IMPORT_TIMEOUT_S:g})")
     p.set_defaults(func=cmd_list)
 
 
@@ -76,18 +110,23 @@ def _add_run(sub) -> None:
                                      "(default: every built-in method)")
     p.add_argument("--scenarios", help="comma-separated scenario names or paths to .toml files "
                                        "(default: every scored built-in scenario)")
+    p.add_argument("--conditions", metavar="A,B|all",
+                   help="comma-separated deployment conditions, or 'all' (default: same-session, the "
+                        "most favourable; see 'rippleb list')")
     p.add_argument("--seeds", type=int, help=f"number of seeds, i.e. simulated devices (default {DEFAULT_SEEDS})")
     p.add_argument("--seed-start", type=int, help="first seed (default 0)")
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                    help="rows run in parallel processes (default: the number of CPUs, "
                         f"{os.cpu_count()} here; use 1 for the least noisy timings)")
-    p.add_argument("--out", type=Path, help="output directory (default runs/<timestamp>/)")
+    p.add_argument("--out", type=Path, help="output directory, new or empty (default runs/<timestamp>/)")
     p.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT_S,
                    help=f"seconds one row may take before it is killed (default {DEFAULT_TIMEOUT_S:g}; 0: none)")
     p.add_argument("--memory-limit", type=float, default=DEFAULT_MEMORY_MB, metavar="MB",
                    help=f"memory one row may allocate, in MB (default {DEFAULT_MEMORY_MB:g}; 0: none)")
     p.add_argument("--resume", type=Path, metavar="DIR",
-                   help="finish an interrupted run: run only the rows missing from DIR/results.csv")
+                   help="finish an interrupted run with the selection in DIR/run.json: run the rows "
+                        "missing from DIR/results.csv and those that failed for an environmental "
+                        "reason (disk full, killed)")
     p.add_argument("--log", type=Path, help="run on a recorded log (.csv or .parquet) instead of scenarios")
     p.add_argument("--calibration", type=Path,
                    help="with --log: the calibration log (needs torque_ref); default: the log itself, "
@@ -103,6 +142,9 @@ def _add_simulate(sub) -> None:
                                    "torque_true, torque_ref to FILE (.csv or .parquet).")
     p.add_argument("scenario", metavar="SCENARIO")
     p.add_argument("--seed", type=int, default=0, help="device seed (default 0)")
+    p.add_argument("--condition", default="same-session", metavar="NAME",
+                   help="deployment condition of the simulated session (default same-session; "
+                        "see 'rippleb list')")
     p.add_argument("--out", type=Path, required=True, metavar="FILE", help="output .csv or .parquet")
     p.set_defaults(func=cmd_simulate)
 
@@ -126,13 +168,17 @@ def cmd_list(args) -> int:
     from rippleb.registry import Registry
     from rippleb.scenario import builtin_scenarios, load_scenario
 
+    from rippleb.conditions import CONDITIONS
+
     registry = Registry.discover()
-    registry.load_all()
+    timeout = _limit("--import-timeout", args.import_timeout) or None
+    errors = probe_plugins(registry, timeout)
     print("methods:")
     for name in registry.names():
         entry = registry.entries[name]
-        origin = "broken" if entry.broken else entry.origin
-        extra = f"  {entry.error}" if entry.broken else ""
+        error = entry.error or errors.get(name)
+        origin = "broken" if error else entry.origin
+        extra = f"  {error}" if error else ""
         print(f"  {name:<28} {origin:<8} {entry.source}{extra}")
     for module, error in sorted(registry.broken_modules.items()):
         print(f"  {'?':<28} {'broken':<8} {module}  {error}")
@@ -143,7 +189,41 @@ def cmd_list(args) -> int:
         except RipplebError as exc:
             scored = f"broken  {exc}"
         print(f"  {name:<28} {scored}")
+    print("conditions:")
+    for name, description in CONDITIONS.items():
+        print(f"  {name:<28} {description}")
     return 0
+
+
+def probe_plugins(registry, timeout: float) -> dict[str, str]:
+    """Import every plugin in its own isolated child, under ``timeout`` seconds each;
+    return ``{name: one-line error}`` of those that failed. The parent never runs
+    plugin code, so a plugin that hangs or exits at import delays only itself."""
+    from rippleb.errors import PluginError
+    from rippleb.pool import Pool
+
+    def job(entry):
+        def load():
+            entry.load()
+            return b""
+        return load
+
+    plugins = [name for name in registry.names("plugin") if not registry.entries[name].broken]
+    pool, errors = Pool(max(1, min(len(plugins), os.cpu_count() or 1))), {}
+    pending = list(plugins)
+    while pending or pool.busy:
+        while pending and pool.free:
+            name = pending.pop(0)
+            pool.submit(name, job(registry.entries[name]), timeout)
+        for fin in pool.wait():
+            if fin.kind == "raised":
+                errors[fin.key] = fin.value.split("is broken: ", 1)[-1] if PluginError.__name__ in fin.value \
+                    else fin.value
+            elif fin.kind == "timeout":
+                errors[fin.key] = f"TimeoutError: import took longer than {timeout:g} s (--import-timeout)"
+            elif fin.kind != "done":
+                errors[fin.key] = f"import ended the process (exit code {fin.value})"
+    return errors
 
 
 def cmd_run(args) -> int:
@@ -168,8 +248,8 @@ def _record_run(args, provenance: dict, wall_s: float) -> None:
     import json
 
     out_dir = getattr(args, "out_dir", None)
-    if out_dir is None or not (out_dir / "run.json").is_file():
-        return  # the run never started (bad arguments): nothing to describe
+    if out_dir is None or not getattr(args, "started", False):
+        return  # the run never started (bad arguments, a refused directory): nothing to describe
     path = out_dir / "provenance.json"
     provenance.update(jobs=args.jobs, wall_s=wall_s, finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
     if args.resume is not None and path.is_file():
@@ -190,14 +270,22 @@ def _record_run(args, provenance: dict, wall_s: float) -> None:
 def _run(args, start: float) -> int:
     from rippleb import runner
 
-    timeout = args.timeout or None
-    memory = args.memory_limit or None
+    timeout = _limit("--timeout", args.timeout)
+    memory = _limit("--memory-limit", args.memory_limit)
+    for flag, value in (("--methods", args.methods), ("--scenarios", args.scenarios),
+                        ("--conditions", args.conditions)):
+        if value is not None and not value.replace(",", "").strip():
+            raise InputError(f"{flag} is empty; leave it out for the default")
     progress = False if args.no_progress else None
+
+    def started():
+        args.started = True
     if args.log is not None:
         _refuse_with_log(args)
         args.out_dir = args.out or runner.default_out_dir()
         frame = runner.run_log(args.log, args.calibration, args.methods, jobs=args.jobs,
-                               out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress)
+                               out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress,
+                               on_start=started)
         if args.calibration is None:
             print("rippleb: warning: no --calibration: methods are fitted on the scored log "
                   "itself, which flatters every method; pass a separate calibration recording",
@@ -205,18 +293,22 @@ def _run(args, start: float) -> int:
     elif args.resume is not None:
         config = runner.read_config(args.resume)
         args.out_dir = args.resume
+        seeds = config["seeds"] if args.seeds is None and args.seed_start is None \
+            else (runner.DEFAULT_SEEDS if args.seeds is None else args.seeds)
         frame = runner.run(args.methods or config["methods"], args.scenarios or config["scenarios"],
-                           config["seeds"] if args.seeds is None else args.seeds,
+                           seeds, conditions=args.conditions or config.get("conditions"),
                            seed_start=args.seed_start or 0, jobs=args.jobs, out=args.resume,
-                           timeout=timeout, memory_mb=memory, resume=True, progress=progress)
+                           timeout=timeout, memory_mb=memory, resume=True, progress=progress,
+                           on_start=started)
     else:
         if args.calibration is not None:
             raise InputError("--calibration only applies with --log")
         args.out_dir = args.out or runner.default_out_dir()
         frame = runner.run(args.methods, args.scenarios,
                            runner.DEFAULT_SEEDS if args.seeds is None else args.seeds,
-                           seed_start=args.seed_start or 0, jobs=args.jobs, out=args.out_dir,
-                           timeout=timeout, memory_mb=memory, progress=progress)
+                           conditions=args.conditions, seed_start=args.seed_start or 0, jobs=args.jobs, out=args.out_dir,
+                           timeout=timeout, memory_mb=memory, progress=progress,
+                               on_start=started)
     from rippleb.report import summary_markdown
 
     print(summary_markdown(frame))
@@ -229,25 +321,32 @@ def _run(args, start: float) -> int:
 def _report_broken_plugins(frame) -> int:
     """One stderr line per requested plugin that failed to import; exit 1 if any.
 
-    Its rows are kept with status ``error`` and the other methods ran (DESIGN.md), but a
-    run asked to include a method it could not load is not a clean run.
+    Its rows are kept with status ``error`` and the other methods ran, but a run asked to
+    include a method it could not load is not a clean run. Judged from the rows (every row
+    of the method failed to import it): the CLI never imports plugin code itself.
     """
-    from rippleb.errors import PluginError
-    from rippleb.registry import Registry
-
-    registry = Registry.discover()
     broken = 0
-    for name in sorted(frame["method"].unique()) if len(frame) else []:
-        try:
-            registry.get(name).load()
-        except PluginError as exc:
-            print(f"rippleb: error: {exc}", file=sys.stderr)
+    if not len(frame):
+        return 0
+    for name, rows in frame.groupby("method"):
+        messages = rows["message"].astype(str)
+        failed = messages[messages.str.startswith("PluginError: ")]
+        if len(failed) == len(rows):
+            print(f"rippleb: error: {failed.iloc[0][len('PluginError: '):]}", file=sys.stderr)
             broken += 1
     return 1 if broken else 0
 
 
+def _limit(flag: str, value: float) -> float | None:
+    """A ``--timeout``/``--memory-limit`` value: 0 means none; negative or NaN is refused."""
+    if not math.isfinite(value) or value < 0:
+        raise InputError(f"{flag} must be a positive number (0 for no limit), got {value:g}")
+    return value or None
+
+
 def _refuse_with_log(args) -> None:
-    for flag, value in (("--scenarios", args.scenarios), ("--seeds", args.seeds),
+    for flag, value in (("--scenarios", args.scenarios), ("--conditions", args.conditions),
+                        ("--seeds", args.seeds),
                         ("--seed-start", args.seed_start), ("--resume", args.resume)):
         if value is not None:
             raise InputError(f"{flag} does not apply with --log")
@@ -255,10 +354,17 @@ def _refuse_with_log(args) -> None:
 
 def cmd_simulate(args) -> int:
     """``rippleb simulate``."""
+    from rippleb.conditions import check_condition
     from rippleb.data import write_log
+    from rippleb.runner import check_scenario
+    from rippleb.scenario import load_scenario
     from rippleb.simulator import simulate
 
-    path = write_log(simulate(args.scenario, args.seed).log, args.out)
+    if args.seed < 0:
+        raise InputError(f"--seed must be a non-negative integer, got {args.seed}")
+    scenario = load_scenario(args.scenario)
+    check_scenario(scenario)
+    path = write_log(simulate(scenario, args.seed, condition=check_condition(args.condition)).log, args.out)
     print(f"wrote {path}")
     return 0
 

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import os
+import secrets
 from pathlib import Path
 from typing import Iterator
 
@@ -18,7 +20,8 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     ``.npz`` otherwise). An ``OSError`` becomes an :class:`InputError` naming ``path``.
     """
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp{path.suffix}")
+    # A unique temporary name: two writers of one path never share a temporary file.
+    tmp = path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp{path.suffix}")
     try:
         yield tmp
         tmp.replace(path)

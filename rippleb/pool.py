@@ -1,34 +1,45 @@
-"""A pool of forked child processes, one per job, each of which can be killed.
+"""The default executor: forked, killable, isolated child processes, one per job.
 
-Why not joblib: a joblib/loky timeout aborts the whole ``Parallel`` call and cannot kill
-one hung worker while the others go on, and loky pickles the arguments of every task.
-A method that sleeps forever or allocates without bound must cost exactly one row, so
-every job here is its own ``fork``-ed process: it inherits the parent's memory (the
-scenario objects, the registry) without pickling, gets a memory limit with
-``RLIMIT_AS``, ignores SIGINT (the parent decides), and is ended with SIGKILL at its
-deadline. Forking costs a few milliseconds per job, small next to one row.
+Why not joblib or multiprocessing: a method that sleeps forever, allocates without bound,
+forks, or signals its process group must cost exactly its own row. Every job therefore
+runs in its own pair of forked processes (see :mod:`rippleb.isolation`): a *keeper*
+(rippleb's code: new session, new PID namespace where permitted, child subreaper) and
+the *worker* it forks, which runs the job with a memory limit (``RLIMIT_AS``), with
+every inherited file descriptor closed but its result pipe, and with its output going
+to a file. At the job's deadline, or when the job ends, the worker and everything it
+started are killed.
+
+The worker sends its result as bytes through a pipe: a tag byte (``D`` done, ``R``
+raised) and the payload. The parent never unpickles what a worker sends; the payload's
+format is the job's business (:mod:`rippleb.cache` encodes plain arrays). A worker that
+writes more than ``max_bytes`` is killed.
 """
 
 from __future__ import annotations
 
-import multiprocessing
+import contextlib
+import errno
 import os
+import select
 import signal
 import sys
 import time
 import traceback
-from dataclasses import dataclass
-from multiprocessing.connection import wait as wait_any
+from dataclasses import dataclass, field
 
+from rippleb import isolation
 from rippleb.registry import one_line
 
 POLL_S = 0.2
+KEEPER_GRACE_S = 5.0
+DEFAULT_MAX_BYTES = 2**30
 
 
 @dataclass
 class Finished:
-    """How a job ended: ``kind`` is ``done`` (``value`` holds its result), ``raised``
-    (``value`` is the one-line error), ``timeout`` or ``died`` (``value`` the exit code)."""
+    """How a job ended: ``kind`` is ``done`` (``value`` holds its bytes), ``raised``
+    (``value`` is the one-line error), ``timeout``, ``oversized`` or ``died`` (``value``
+    the worker's exit code, negative for a signal)."""
 
     key: object
     kind: str
@@ -39,27 +50,46 @@ class Finished:
 @dataclass
 class _Running:
     key: object
-    process: multiprocessing.Process
-    conn: object
+    keeper: int
+    result_fd: int
+    ctrl_fd: int
     started: float
     deadline: float | None
+    max_bytes: int
+    result: bytearray = field(default_factory=bytearray)
+    ctrl: bytearray = field(default_factory=bytearray)
+    result_eof: bool = False
+    ctrl_eof: bool = False
+
+    @property
+    def ctrl_lines(self) -> list[str]:
+        return bytes(self.ctrl).decode(errors="replace").splitlines()
+
+    @property
+    def worker(self) -> int | None:
+        lines = self.ctrl_lines
+        return int(lines[0].split()[0]) if lines else None
+
+    @property
+    def exit_code(self) -> int | None:
+        lines = self.ctrl_lines
+        return int(lines[1]) if len(lines) > 1 and bytes(self.ctrl).endswith(b"\n") else None
 
 
 class Pool:
-    """Run callables in at most ``size`` forked children at once.
+    """Run callables returning ``bytes`` in at most ``size`` isolated children at once.
 
     Parameters
     ----------
     size
-        Children running at once.
+        Jobs running at once.
     memory_mb
-        Extra address space a child may map beyond what it inherits [MB]; None for no limit.
+        Extra address space a worker may map beyond what it inherits [MB]; None for no limit.
     """
 
     def __init__(self, size: int = 1, memory_mb: float | None = None):
         self.size = size
         self.memory_mb = memory_mb
-        self._ctx = multiprocessing.get_context("fork")
         self._running: list[_Running] = []
 
     @property
@@ -69,20 +99,27 @@ class Pool:
 
     @property
     def busy(self) -> bool:
-        """True while a child is running."""
+        """True while a job is running."""
         return bool(self._running)
 
-    def submit(self, key, fn, timeout: float | None = None, output: str | None = None) -> None:
-        """Start ``fn()`` in a child; its stdout and stderr go to the file ``output`` (or
-        /dev/null), so a chatty plugin cannot garble the CLI's output."""
-        receiver, sender = self._ctx.Pipe(duplex=False)
-        process = self._ctx.Process(target=_child, args=(sender, fn, self.memory_mb, output),
-                                    daemon=True)
-        process.start()
-        sender.close()
+    def submit(self, key, fn, timeout: float | None = None, output: str | None = None,
+               max_bytes: int | None = None) -> None:
+        """Start ``fn()`` in an isolated worker; its stdout and stderr go to the file
+        ``output`` (or /dev/null), so a chatty plugin cannot garble the CLI's output."""
+        result_r, result_w = os.pipe()
+        ctrl_r, ctrl_w = os.pipe()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        pid = os.fork()
+        if pid == 0:
+            _keeper(fn, result_w, ctrl_w, self.memory_mb, output)  # never returns
+        os.close(result_w)
+        os.close(ctrl_w)
+        for fd in (result_r, ctrl_r):
+            os.set_blocking(fd, False)
         now = time.monotonic()
-        deadline = now + timeout if timeout else None
-        self._running.append(_Running(key, process, receiver, now, deadline))
+        self._running.append(_Running(key, pid, result_r, ctrl_r, now, now + timeout if timeout else None,
+                                      max_bytes or DEFAULT_MAX_BYTES))
 
     def wait(self) -> list[Finished]:
         """Block until at least one job ends (or passes its deadline); return those that did."""
@@ -94,57 +131,136 @@ class Pool:
             # Wake at least every POLL_S: a signal caught by another thread (tqdm's
             # monitor, a timer) only runs its Python handler once the main thread wakes.
             timeout = min([POLL_S] + [max(0.0, d - time.monotonic()) for d in deadlines])
-            handles = [r.conn for r in self._running] + [r.process.sentinel for r in self._running]
-            wait_any(handles, timeout)
+            fds = [fd for r in self._running for fd, eof in ((r.result_fd, r.result_eof),
+                                                             (r.ctrl_fd, r.ctrl_eof)) if not eof]
+            with contextlib.suppress(InterruptedError):
+                select.select(fds, [], [], timeout)
 
     def kill_all(self) -> None:
-        """End every running child now (used on SIGINT/SIGTERM)."""
+        """End every running job and its processes now (used on SIGINT/SIGTERM)."""
         for run in self._running:
-            _kill(run)
+            _end(run)
         self._running.clear()
 
     def _collect(self) -> list[Finished]:
         done, now = [], time.monotonic()
         for run in list(self._running):
+            _read(run)
             result = None
-            if run.conn.poll():
-                try:
-                    kind, value = run.conn.recv()
-                    result = Finished(run.key, kind, value, now - run.started)
-                except (EOFError, OSError):
-                    pass
-            if result is None and not run.process.is_alive():
-                result = Finished(run.key, "died", run.process.exitcode, now - run.started)
-            if result is None and run.deadline is not None and now >= run.deadline:
+            if len(run.result) > run.max_bytes:
+                result = Finished(run.key, "oversized", len(run.result), now - run.started)
+            elif run.exit_code is not None or run.ctrl_eof:
+                _end(run)  # the worker is gone: drain its pipe to the end
+                result = _outcome(run, now)
+            elif run.deadline is not None and now >= run.deadline:
                 result = Finished(run.key, "timeout", None, now - run.started)
             if result is not None:
-                _kill(run)
+                _end(run)
                 self._running.remove(run)
                 done.append(result)
         return done
 
 
-def _kill(run: _Running) -> None:
-    if run.process.is_alive():
-        run.process.kill()
-    run.process.join()
-    run.conn.close()
+def _outcome(run: _Running, now: float) -> Finished:
+    wall = now - run.started
+    tag, payload = bytes(run.result[:1]), bytes(run.result[1:])
+    if tag == b"D":
+        return Finished(run.key, "done", payload, wall)
+    if tag == b"R":
+        return Finished(run.key, "raised", payload.decode(errors="replace"), wall)
+    code = run.exit_code
+    return Finished(run.key, "died", code, wall)
 
 
-def _child(conn, fn, memory_mb, output) -> None:
-    # The parent owns interruption: it kills children, then writes what finished.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+def _read(run: _Running) -> None:
+    for name in ("result", "ctrl"):
+        fd, buf = getattr(run, f"{name}_fd"), getattr(run, name)
+        if getattr(run, f"{name}_eof"):
+            continue
+        while len(buf) <= run.max_bytes:
+            try:
+                chunk = os.read(fd, 1 << 20)
+            except BlockingIOError:
+                break
+            except OSError:
+                chunk = b""
+            if not chunk:
+                setattr(run, f"{name}_eof", True)
+                break
+            buf += chunk
+
+
+def _end(run: _Running) -> None:
+    """Kill the worker (and so its namespace), let the keeper clean up, reap the keeper."""
+    if run.keeper is None:
+        return
+    if run.exit_code is None and run.worker is not None:
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.kill(run.worker, signal.SIGKILL)
+    deadline = time.monotonic() + KEEPER_GRACE_S
+    while True:
+        pid, _ = os.waitpid(run.keeper, os.WNOHANG)
+        if pid or time.monotonic() > deadline:
+            break
+        time.sleep(0.005)
+    if not pid:  # the keeper did not finish its cleanup in time: end its whole session
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(run.keeper, signal.SIGKILL)
+        os.waitpid(run.keeper, 0)
+    # Every writer should be gone now: take what is left in the pipes (bounded in time,
+    # in case an escaped process still holds one), then close them.
+    give_up = time.monotonic() + 1.0
+    while not (run.result_eof and run.ctrl_eof) and time.monotonic() < give_up:
+        _read(run)
+        if len(run.result) > run.max_bytes:
+            break
+        open_fds = [fd for fd, eof in ((run.result_fd, run.result_eof), (run.ctrl_fd, run.ctrl_eof))
+                    if not eof]
+        if open_fds:
+            with contextlib.suppress(InterruptedError):
+                select.select(open_fds, [], [], 0.05)
+    os.close(run.result_fd)
+    os.close(run.ctrl_fd)
+    run.keeper = None
+
+
+def _keeper(fn, result_w: int, ctrl_w: int, memory_mb, output) -> None:
+    """rippleb's own process between the runner and a job: session, namespace, cleanup."""
     try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        os.setsid()
+        isolation.close_fds_except(result_w, ctrl_w)
+        isolated = isolation.new_pid_namespace()
+        isolation.become_subreaper()
+        worker = os.fork()
+        if worker == 0:
+            os.close(ctrl_w)
+            _worker(fn, result_w, memory_mb, output)  # never returns
+        os.close(result_w)
+        _write_all(ctrl_w, f"{worker} {int(isolated)}\n".encode())
+        _, status = os.waitpid(worker, 0)
+        isolation.end_descendants()
+        _write_all(ctrl_w, f"{os.waitstatus_to_exitcode(status)}\n".encode())
+    finally:
+        os._exit(0)
+
+
+def _worker(fn, result_w: int, memory_mb, output) -> None:
+    message = b"R" + b"worker did not start"
+    try:
+        isolation.die_with_parent()
+        isolation.close_fds_except(result_w)
         _redirect_output(output)
         _limit_memory(memory_mb)
-        message = ("done", fn())
-    except BaseException as exc:  # everything a plugin can raise becomes a row status
-        traceback.print_exc()
-        message = ("raised", one_line(exc))
-    try:
-        conn.send(message)
-        conn.close()
+        try:
+            payload = fn()
+            message = b"D" + bytes(payload)
+        except BaseException as exc:  # everything a plugin can raise becomes a row status
+            traceback.print_exc()
+            message = b"R" + one_line(exc).encode()
+        _write_all(result_w, message)
+        os.close(result_w)
         sys.stdout.flush()
         sys.stderr.flush()
     finally:
@@ -152,10 +268,25 @@ def _child(conn, fn, memory_mb, output) -> None:
         os._exit(0)
 
 
+def _write_all(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        try:
+            n = os.write(fd, view)
+        except InterruptedError:
+            continue
+        except OSError as exc:
+            if exc.errno == errno.EPIPE:
+                return
+            raise
+        view = view[n:]
+
+
 def _redirect_output(path: str | None) -> None:
+    null = os.open(os.devnull, os.O_RDONLY)
+    os.dup2(null, 0)
+    os.close(null)
     fd = os.open(path or os.devnull, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-    sys.stdout.flush()
-    sys.stderr.flush()
     os.dup2(fd, 1)
     os.dup2(fd, 2)
     os.close(fd)
@@ -165,7 +296,7 @@ def _redirect_output(path: str | None) -> None:
 
 
 def _limit_memory(memory_mb: float | None) -> None:
-    """Cap the address space at what the child inherited plus ``memory_mb``.
+    """Cap the address space at what the worker inherited plus ``memory_mb``.
 
     RLIMIT_AS counts the mappings inherited from the parent (numpy, scipy, Pinocchio
     and their thread stacks reserve much address space), so an absolute cap would be

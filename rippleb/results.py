@@ -1,26 +1,42 @@
-"""Result rows: column order, system information, and the atomically replaced CSV.
+"""Result rows: column order, system information, the atomically replaced CSV, and its checked reader.
 
-One row per method x scenario x seed, in benchopt's long format: the accuracy and
-timing columns, then provenance (method parameters, calibration source, rippleb,
-Python, platform and CPU) so that a row read alone says where it came from.
+One row per method x scenario x condition x seed, in benchopt's long format: the
+accuracy and timing columns, then provenance (method parameters, calibration source,
+the scenario's content hash, rippleb, Python, platform and CPU) so that a row read
+alone says what it ran and where.
+
+:func:`read_rows` (used by ``--resume`` and ``rippleb report``) trusts nothing it reads:
+it checks every row column by column and drops, with one warning line, rows that are
+truncated, hold text in a numeric cell, have an unknown status, or repeat a key.
 """
 
 from __future__ import annotations
 
+import csv
 import functools
+import math
 import os
 import platform
+import warnings
 from pathlib import Path
 
+from rippleb.conditions import DEFAULT_CONDITION
 from rippleb.errors import InputError
 from rippleb.files import atomic_path
 from rippleb.metrics import METRIC_COLUMNS
 
-KEY_COLUMNS = ("method", "scenario", "seed")
+KEY_COLUMNS = ("method", "scenario", "condition", "seed")
 COLUMNS = (KEY_COLUMNS + ("status",) + METRIC_COLUMNS
-           + ("message", "n_samples", "fit_s", "wall_s", "calibration", "params",
+           + ("message", "n_samples", "fit_s", "wall_s", "calibration", "params", "scenario_sha256",
               "rippleb_version", "python", "numpy", "platform", "cpu", "run_id"))
+NUMERIC_COLUMNS = METRIC_COLUMNS + ("n_samples", "fit_s", "wall_s")
 STATUSES = ("ok", "error", "invalid", "timeout")
+#: message prefix of rows that failed for a reason outside the method (``--resume`` retries them)
+ENVIRONMENT = "environment: "
+
+
+class RunWarning(UserWarning):
+    """Something a run or a reader repaired or will do again, said in one line."""
 
 
 @functools.lru_cache(maxsize=1)
@@ -45,19 +61,24 @@ def _cpu_name() -> str:
     return f"{platform.processor() or platform.machine()} x{os.cpu_count()}"
 
 
+def row_key(row: dict) -> tuple:
+    """``(method, scenario, condition, seed)`` of a row dict."""
+    return row["method"], row["scenario"], row.get("condition", DEFAULT_CONDITION), int(row["seed"])
+
+
 class ResultsFile:
     """``DIR/results.csv``, rewritten atomically after each finished row.
 
     Writing a temporary file and ``os.replace``-ing it means a reader, a SIGINT or a
-    ``kill -9`` only ever sees a complete CSV of finished rows. The cost (tens of rows,
-    milliseconds) is negligible next to one row.
+    ``kill -9`` only ever sees a complete CSV of finished rows. The rows in memory are
+    the authority: every write replaces the whole file with them, sorted by key.
 
     Parameters
     ----------
     path
         The CSV file, or None to keep rows in memory only.
     resume
-        Keep the rows already in ``path``.
+        Keep the (checked) rows already in ``path``.
     """
 
     def __init__(self, path: Path | None, resume: bool = False):
@@ -67,38 +88,100 @@ class ResultsFile:
             self.rows = read_rows(path)
 
     def done_keys(self) -> set[tuple]:
-        """``(method, scenario, seed)`` of every row already finished."""
-        return {(r["method"], r["scenario"], int(r["seed"])) for r in self.rows}
+        """``(method, scenario, condition, seed)`` of every row already finished."""
+        return {row_key(r) for r in self.rows}
+
+    def drop_environmental(self) -> list[dict]:
+        """Remove and return the rows that failed for an environmental reason."""
+        dropped = [r for r in self.rows if r.get("status") != "ok"
+                   and str(r.get("message", "")).startswith(ENVIRONMENT)]
+        self.rows = [r for r in self.rows if r not in dropped]
+        return dropped
 
     def add(self, row: dict) -> None:
         """Append one row and replace the file."""
         self.rows.append(row)
+        self.flush()
+
+    def flush(self) -> None:
+        """Replace the file with the rows in memory."""
         if self.path is not None:
-            self._write()
+            with atomic_path(self.path) as tmp:
+                self.frame().to_csv(tmp, index=False)
 
     def frame(self):
-        """The rows as a DataFrame with the standard columns first."""
+        """The rows as a DataFrame, standard columns first, sorted by the row key."""
         import pandas as pd
 
         frame = pd.DataFrame(self.rows)
         extra = sorted(c for c in frame.columns if c not in COLUMNS)
-        return frame.reindex(columns=list(COLUMNS) + extra)
-
-    def _write(self) -> None:
-        with atomic_path(self.path) as tmp:
-            self.frame().to_csv(tmp, index=False)
+        frame = frame.reindex(columns=list(COLUMNS) + extra)
+        if len(frame):
+            frame = frame.sort_values(list(KEY_COLUMNS), kind="stable").reset_index(drop=True)
+        return frame
 
 
 def read_rows(path: Path) -> list[dict]:
-    """The rows of a results CSV as dicts (for ``--resume`` and ``report``)."""
-    import pandas as pd
+    """The checked rows of a results CSV (for ``--resume`` and ``report``).
 
+    Rows that cannot be trusted are dropped with one :class:`RunWarning` line naming the
+    first of them; a file without the key, status and metric columns raises
+    :class:`InputError`. Every cell is read as text first (a scenario named ``NA`` stays
+    ``NA``), then converted by column: ``seed`` to int, the metrics to float.
+    """
+    path = Path(path)
     try:
-        frame = pd.read_csv(path, keep_default_na=True)
-    except Exception as exc:  # pandas raises many types for unreadable files
-        raise InputError(f"{path}: cannot read results: {str(exc).splitlines()[0]}") from None
-    missing = [c for c in KEY_COLUMNS + ("status",) if c not in frame.columns]
+        with open(path, newline="", encoding="utf-8") as fh:
+            lines = list(csv.reader(fh))
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise InputError(f"{path}: cannot read results: {getattr(exc, 'strerror', None) or exc}") from None
+    if not lines:
+        raise InputError(f"{path}: empty file, not a rippleb results file")
+    header, body = lines[0], lines[1:]
+    required = ("method", "scenario", "seed", "status") + METRIC_COLUMNS
+    missing = [c for c in required if c not in header]
     if missing:
         raise InputError(f"{path}: not a rippleb results file (missing column(s) {', '.join(missing)})")
-    return frame.to_dict("records")
+    rows, dropped, seen = [], [], set()
+    for number, cells in enumerate(body, start=2):
+        if not cells:
+            continue
+        row, problem = _check_row(header, cells)
+        if problem is None and row_key(row) in seen:
+            problem = "repeats the key of an earlier row"
+        if problem is not None:
+            dropped.append(f"line {number} {problem}")
+            continue
+        seen.add(row_key(row))
+        rows.append(row)
+    if dropped:
+        warnings.warn(f"{path}: ignored {len(dropped)} row(s) that cannot be trusted (first: {dropped[0]})",
+                      RunWarning, stacklevel=2)
+    return rows
 
+
+def _check_row(header: list[str], cells: list[str]) -> tuple[dict, str | None]:
+    if len(cells) != len(header):
+        return {}, f"has {len(cells)} of {len(header)} fields (truncated?)"
+    row: dict = dict(zip(header, cells))
+    row.setdefault("condition", DEFAULT_CONDITION)
+    for name in ("method", "scenario", "condition"):
+        if not row[name]:
+            return row, f"has an empty {name}"
+    try:
+        row["seed"] = int(row["seed"])
+    except ValueError:
+        return row, f"has seed {row['seed'][:20]!r}, not a whole number"
+    if row["seed"] < 0:
+        return row, "has a negative seed"
+    if row["status"] not in STATUSES:
+        return row, f"has an unknown status {row['status'][:20]!r}"
+    for name in NUMERIC_COLUMNS:
+        if name in row:
+            try:
+                row[name] = float(row[name]) if row[name] != "" else math.nan
+            except ValueError:
+                return row, f"holds {row[name][:20]!r} in the numeric column {name}"
+    if row["status"] == "ok" and not any(math.isfinite(row[c]) for c in ("rms_error_nm", "rms_error_ref_nm")):
+        return row, "is 'ok' without an RMS error"
+    return row, None

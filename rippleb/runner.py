@@ -1,82 +1,72 @@
-"""The causal streaming runner: every method x scenario x seed, one killable process each.
+"""The causal streaming runner: every method x scenario x condition x seed, one isolated process each.
 
-A run has two kinds of jobs, both in forked children of :class:`rippleb.pool.Pool`:
+A run has three kinds of jobs (:mod:`rippleb.jobs`), each in its own isolated child of
+:class:`rippleb.pool.Pool`:
 
-* a *simulation* job per (scenario, seed), including ``calibration`` per seed: it calls
-  ``simulate(scenario, seed)`` once and stores the log and the truth the metrics need in
-  an ``.npz`` file of the run's cache (plain arrays, read with ``allow_pickle=False``);
-* a *fit* job per method x calibration log (i.e. per method and seed): it ``fit``s the
-  method on the calibration log (with ``torque_ref``) once, as on a real device, and
-  pickles the fitted method into the cache;
-* a *row* job per method x scenario x seed, started once its simulations and its fit
-  exist: it loads the fitted method, ``reset``s it, streams the evaluation log in blocks of
-  ``spec.block_size`` samples (:func:`rippleb.streaming.stream`), and scores the estimate
-  (:mod:`rippleb.metrics`). Every row of one fit starts from the same fitted state, so the
-  rows equal those of fitting in each row. A method that cannot be pickled is fitted in
-  each of its rows instead; a fit that fails gives each of its rows the fit's status.
+* a *simulation* per (scenario content, condition, seed), plus the ``calibration``
+  scenario per seed, always simulated under ``same-session`` (it is the device's first
+  session). It writes what methods may see to hashed cache files and sends the truth
+  back through its pipe; the runner keeps the truth in memory only, and only while rows
+  of that case are pending;
+* a *fit* per method and calibration log: ``fit`` once, as on a real device, and pickle
+  the fitted method into the cache (a method that cannot be pickled is fitted in each row);
+* a *row* per :class:`~rippleb.rows.RowKey`: it verifies its inputs, loads the fitted
+  method, ``reset``s it, streams the scored log in ticks and sends back the estimate and
+  tick times. The runner scores the estimate against the truth it holds.
 
-Each row ends as ``ok``, ``error`` (an exception, a memory-limit hit, a crash),
-``invalid`` (wrong length or dtype, NaN) or ``timeout`` (killed at ``timeout`` seconds),
-and is written to ``DIR/results.csv`` as soon as it ends (:class:`rippleb.results.ResultsFile`).
-SIGINT or SIGTERM kills the running children and leaves the finished rows on disk;
-``resume=True`` runs only the rows missing from ``DIR/results.csv``.
+Each row ends as ``ok``, ``error``, ``invalid`` or ``timeout`` and is written to
+``DIR/results.csv`` as soon as it ends (:class:`rippleb.results.ResultsFile`). A run
+directory is locked while a run writes it, never overwritten without ``resume=True``,
+and always resumable from ``DIR/run.json``: ``resume=True`` validates what it reads,
+and runs the rows missing from ``results.csv`` plus those that failed for an
+environmental reason. See ``docs/robustness.md``.
 """
 
 from __future__ import annotations
 
 import contextlib
 import datetime as _dt
+import fcntl
 import json
-import pickle
-import re
+import math
 import signal
 import sys
 import tempfile
 import time
-from dataclasses import asdict, dataclass
+import warnings
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from rippleb.data import JointSpec, SensorLog
+from rippleb import jobs as job_fns
+from rippleb.cache import Artefact, digest, log_bytes, store, unpack
+from rippleb.conditions import DEFAULT_CONDITION
+from rippleb.data import SensorLog
 from rippleb.errors import InputError
 from rippleb.files import atomic_path
 from rippleb.metrics import Truth, score, tick_stats
 from rippleb.pool import Pool
-from rippleb.registry import Registry, one_line
-from rippleb.results import ResultsFile, system_info
-from rippleb.streaming import InvalidOutput, prepare_blocks, stream
+from rippleb.registry import Registry
+from rippleb.results import ENVIRONMENT, STATUSES, ResultsFile, RunWarning, system_info
+from rippleb.rows import (CALIBRATION, FITTING, SCORED, Case, RowKey, check_trajectory, scenario_hash,
+                          select_conditions, select_scenarios, split_names)
+
+# Kept for callers of the former module layout.
+from rippleb.jobs import params_json as _params_json  # noqa: F401
 
 DEFAULT_SEEDS = 3
 DEFAULT_TIMEOUT_S = 300.0
 DEFAULT_MEMORY_MB = 4096.0
-CALIBRATION = "calibration"
-_ARRAYS = ("moving", "wave_angle", "eval_mask")
+MIN_FS, MAX_FS = 100.0, 1e6
+MIN_CALIBRATION_S = 1.0
 
 
-@dataclass(frozen=True)
-class _Row:
-    method: str
-    scenario: str
-    seed: int
-
-
-@dataclass(frozen=True)
-class _Case:
-    scenario: str
-    seed: int
-
-
-@dataclass(frozen=True)
-class _Fit:
-    method: str
-    calibration: _Case
-
-
-def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, seed_start: int = 0, jobs: int = 1,
-        out=None, timeout: float | None = DEFAULT_TIMEOUT_S, memory_mb: float | None = DEFAULT_MEMORY_MB,
-        resume: bool = False, progress: bool | None = False):
-    """Run methods on simulated scenarios and return one row per method x scenario x seed.
+def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, seed_start: int = 0,
+        jobs: int = 1, out=None, timeout: float | None = DEFAULT_TIMEOUT_S,
+        memory_mb: float | None = DEFAULT_MEMORY_MB, resume: bool = False, progress: bool | None = False,
+        on_start=None):
+    """Run methods on simulated scenarios; one row per method x scenario x condition x seed.
 
     Parameters
     ----------
@@ -87,53 +77,70 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, seed_start: int = 
         Scenario names or paths to ``.toml`` files; None for every scored built-in.
     seeds
         The number of seeds (devices) ``seed_start .. seed_start + seeds - 1``, or a list of seeds.
+    conditions
+        Deployment conditions (``rippleb.conditions.CONDITIONS``, a list or ``"a,b"``, or
+        ``"all"``); None for ``same-session`` only.
     seed_start
         First seed when ``seeds`` is a number.
     jobs
         Rows run at once, each in its own process.
     out
-        Directory for ``results.csv`` (created), or None to keep the rows in memory only.
+        Directory for ``results.csv`` (created; refused if not empty unless ``resume``),
+        or None to keep the rows in memory only.
     timeout
-        Seconds one row (fit and run) may take before it is killed; None for no limit.
+        Seconds one job (fit or row) may take before it is killed; None for no limit.
     memory_mb
-        Address space one row may add [MB] before allocations fail; None for no limit.
+        Address space one job may add [MB] before allocations fail; None for no limit.
     resume
-        Keep the rows already in ``out/results.csv`` and run only the missing ones.
+        Finish the run in ``out`` (same selection as ``out/run.json``): keep its finished
+        rows, run the missing ones and those that failed for an environmental reason.
     progress
         Show a progress bar on stderr (None: only on a terminal).
+    on_start
+        Called once the run directory is checked and locked, before any job starts.
 
     Returns
     -------
     pandas.DataFrame
-        The rows, standard columns first (see ``rippleb.results.COLUMNS``).
+        The rows sorted by (method, scenario, condition, seed), standard columns first
+        (see ``rippleb.results.COLUMNS``).
     """
     from rippleb.scenario import load_scenario, scored_scenarios
 
+    check_options(jobs=jobs, timeout=timeout, memory_mb=memory_mb)
     registry = Registry.discover()
     names = resolve_methods(registry, methods)
-    # Refuse a trajectory outside the joint's limits here, as one line, not as error rows.
-    scenario_objs = [load_scenario(s).check_limits() for s in (_split(scenarios) or scored_scenarios())]
+    if scenarios is not None and not split_names(scenarios):
+        raise InputError("--scenarios is empty; give scenario names or .toml paths")
+    given = split_names(scenarios) or scored_scenarios()
+    scenario_objs = select_scenarios(given, load_scenario)
+    for scenario in scenario_objs:
+        check_scenario(scenario)
+    condition_list = select_conditions(conditions)
     seed_list = _seed_list(seeds, seed_start)
-    cases = {s.name: s for s in scenario_objs}
-    cases.setdefault(CALIBRATION, load_scenario(CALIBRATION))
-    rows = [_Row(m, s.name, k) for k in seed_list for s in scenario_objs for m in names]
-    calibration = {r: _Case(CALIBRATION, r.seed) for r in rows}
-    jobs_sim = {}
-    for k in seed_list:
-        jobs_sim[_Case(CALIBRATION, k)] = (cases[CALIBRATION], k)
-        for s in scenario_objs:
-            jobs_sim[_Case(s.name, k)] = (s, k)
-    given = _split(scenarios) or [s.name for s in scenario_objs]
-    config = {"methods": names, "seeds": seed_list,
-              "scenarios": [str(Path(s).resolve()) if s.endswith(".toml") else s for s in given]}
-    return _execute(registry, rows, calibration, jobs_sim, {}, out=out, jobs=jobs, timeout=timeout,
-                    memory_mb=memory_mb, resume=resume, progress=progress, config=config,
-                    calibration_label=CALIBRATION)
+    calibration = load_scenario(CALIBRATION)
+    plan = _Plan(calibration_label=CALIBRATION)
+    cal_content = scenario_hash(calibration)
+    for seed in seed_list:
+        cal_case = Case(CALIBRATION, cal_content, DEFAULT_CONDITION, seed, FITTING)
+        plan.add_sim(calibration, cal_case)
+        for scenario in scenario_objs:
+            content = scenario_hash(scenario)
+            for condition in condition_list:
+                case = Case(scenario.name, content, condition, seed, SCORED)
+                plan.add_sim(scenario, case)
+                for method in names:
+                    plan.add_row(RowKey(method, scenario.name, condition, seed), case, cal_case)
+    config = {"methods": names, "conditions": condition_list, "seeds": seed_list,
+              "scenarios": [str(Path(s).resolve()) if s.endswith(".toml") else s for s in
+                            dict.fromkeys(given)]}
+    return _execute(registry, plan, out=out, jobs=jobs, timeout=timeout, memory_mb=memory_mb,
+                    resume=resume, progress=progress, config=config, on_start=on_start)
 
 
 def run_log(log, calibration=None, methods=None, *, jobs: int = 1, out=None,
             timeout: float | None = DEFAULT_TIMEOUT_S, memory_mb: float | None = DEFAULT_MEMORY_MB,
-            progress: bool | None = False):
+            progress: bool | None = False, on_start=None):
     """Run methods on a recorded log; score against ``torque_ref`` (and ``torque_true`` if present).
 
     Parameters
@@ -142,13 +149,15 @@ def run_log(log, calibration=None, methods=None, *, jobs: int = 1, out=None,
         Paths to CSV/Parquet logs, or :class:`SensorLog`. Methods are fit on
         ``calibration``; without one, on ``log`` itself if it has ``torque_ref`` (the
         rows then say ``calibration = self``: fit and scored on the same data).
-    methods, jobs, out, timeout, memory_mb, progress
+    methods, jobs, out, timeout, memory_mb, progress, on_start
         As in :func:`run`.
     """
     from rippleb.data import read_log
 
+    check_options(jobs=jobs, timeout=timeout, memory_mb=memory_mb)
     log_name = Path(log).name if not isinstance(log, SensorLog) else log.meta.get("source", "log")
     log = log if isinstance(log, SensorLog) else read_log(log)
+    check_recording(log, log_name)
     if calibration is None:
         if log.torque_ref is None:
             raise InputError(f"{log_name}: no torque_ref column, so methods cannot be calibrated on it; "
@@ -159,21 +168,27 @@ def run_log(log, calibration=None, methods=None, *, jobs: int = 1, out=None,
         cal = calibration if isinstance(calibration, SensorLog) else read_log(calibration, spec=log.spec)
         if cal.torque_ref is None:
             raise InputError(f"{label}: a calibration log needs a torque_ref column")
+        check_recording(cal, label)
+        check_calibration(cal, label, log)
     registry = Registry.discover()
     names = resolve_methods(registry, methods)
     scenario = f"log:{log_name}"
-    rows = [_Row(m, scenario, 0) for m in names]
-    ready = {_Case(scenario, 0): (log, Truth.from_recording(log)),
-             _Case(CALIBRATION, 0): (cal, Truth.from_recording(cal))}
-    calibration_of = {r: _Case(CALIBRATION, 0) for r in rows}
-    return _execute(registry, rows, calibration_of, {}, ready, out=out, jobs=jobs, timeout=timeout,
-                    memory_mb=memory_mb, resume=False, progress=progress,
-                    config={"methods": names, "log": log_name}, calibration_label=label)
+    case = Case(scenario, digest(log_bytes(log)), DEFAULT_CONDITION, 0, SCORED)
+    cal_case = Case(CALIBRATION, digest(log_bytes(cal)), DEFAULT_CONDITION, 0, FITTING)
+    plan = _Plan(calibration_label=label)
+    plan.ready = {case: (log, Truth.from_recording(log)), cal_case: (cal, None)}
+    for method in names:
+        plan.add_row(RowKey(method, scenario, DEFAULT_CONDITION, 0), case, cal_case)
+    return _execute(registry, plan, out=out, jobs=jobs, timeout=timeout, memory_mb=memory_mb,
+                    resume=False, progress=progress, on_start=on_start,
+                    config={"methods": names, "log": log_name, "conditions": [DEFAULT_CONDITION]})
 
 
 def resolve_methods(registry: Registry, methods) -> list[str]:
     """Method names to run; unknown names raise :class:`InputError` with a suggestion."""
-    wanted = _split(methods)
+    wanted = split_names(methods)
+    if methods is not None and not wanted:
+        raise InputError("--methods is empty; give method names or 'all'")
     if not wanted:
         return registry.names("builtin")
     if wanted == ["all"]:
@@ -183,264 +198,363 @@ def resolve_methods(registry: Registry, methods) -> list[str]:
     return list(dict.fromkeys(wanted))
 
 
+def check_options(*, jobs, timeout, memory_mb) -> None:
+    """Refuse a job count below 1, and a negative or non-finite timeout or memory limit."""
+    if isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1:
+        raise InputError(f"--jobs must be a whole number of at least 1, got {jobs!r}")
+    for option, value, unit in (("--timeout", timeout, "seconds"), ("--memory-limit", memory_mb, "MB")):
+        if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise InputError(f"{option} must be a positive number of {unit} (0 for no limit), got {value!r}")
+
+
+def check_scenario(scenario) -> None:
+    """Refuse a scenario outside the joint's position or speed limits, or not finite."""
+    from rippleb import robot as arm
+
+    model = arm.load_model(scenario.robot)
+    joint = model.joints[model.getJointId(scenario.joint)]
+    check_trajectory(scenario, float(model.velocityLimit[joint.idx_v]))
+
+
+def check_recording(log: SensorLog, name: str) -> None:
+    """Refuse a recorded log whose sample rate (from ``t``) is implausible."""
+    fs = rate_from_t(log)
+    if not MIN_FS <= fs <= MAX_FS:
+        hint = " (is t in seconds?)" if fs < MIN_FS else ""
+        raise InputError(f"{name}: column t gives a sample rate of {fs:.6g} Hz, outside the plausible "
+                         f"{MIN_FS:g} Hz - {MAX_FS:g} Hz for a joint torque sensor{hint}")
+
+
+def check_calibration(cal: SensorLog, name: str, scored: SensorLog) -> None:
+    """Refuse a calibration log too short to fit on, or recorded at another rate than the scored log."""
+    seconds = (cal.t[-1] - cal.t[0]) if len(cal) > 1 else 0.0
+    if seconds < MIN_CALIBRATION_S:
+        raise InputError(f"{name}: {len(cal)} samples ({seconds:.3g} s) is too short to calibrate on; "
+                         f"record at least {MIN_CALIBRATION_S:g} s with the joint moving")
+    fs, scored_fs = rate_from_t(cal), rate_from_t(scored)
+    if not math.isclose(fs, scored_fs, rel_tol=1e-3):
+        raise InputError(f"{name}: recorded at {fs:.6g} Hz, the scored log at {scored_fs:.6g} Hz; "
+                         f"record both at one rate")
+
+
+def rate_from_t(log: SensorLog) -> float:
+    """The sample rate [Hz] given by the log's time stamps (its spec's ``fs`` if it has one sample)."""
+    if len(log) < 2:
+        return float(log.spec.fs)
+    return 1.0 / float(np.median(np.diff(log.t)))
+
+
 def default_out_dir() -> Path:
     """``runs/<timestamp>/`` in the current directory."""
     return Path("runs") / _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
 
 
-def _execute(registry, rows, calibration_of, sim_jobs, ready, *, out, jobs, timeout, memory_mb,
-             resume, progress, config, calibration_label):
-    out_dir = _prepare_out(out, resume, config)
-    results = ResultsFile(out_dir / "results.csv" if out_dir else None, resume=resume)
-    done = results.done_keys()
-    rows = [r for r in rows if (r.method, r.scenario, r.seed) not in done]
-    needed = {c for r in rows for c in (_Case(r.scenario, r.seed), calibration_of[r])}
-    with _cache_dir(out_dir) as cache:
-        paths = {c: cache / f"{_safe(c.scenario)}--{c.seed}.npz" for c in needed}
-        fits = {_Fit(r.method, calibration_of[r]) for r in rows}
-        # Fitted methods live only in this run's own cache; a resumed run fits again.
-        paths.update({f: cache / f"fit--{_safe(f.method)}--{_safe(f.calibration.scenario)}--"
-                             f"{f.calibration.seed}.pkl" for f in fits})
-        for case, (log, truth) in ready.items():
-            if case in needed:
-                save_case(paths[case], log, truth)
-        state = {c: ("done" if c in ready or paths[c].is_file() else "pending") for c in needed}
-        state.update({f: "pending" for f in fits})
-        context = _Context(registry, results, calibration_of, paths, calibration_label,
-                           _log_dir(out_dir), timeout, time.strftime("%Y%m%dT%H%M%S"))
-        with _progress(len(rows), progress) as bar, _sigterm_as_interrupt():
-            _schedule(Pool(max(1, int(jobs)), memory_mb), rows, sim_jobs, state, context, bar)
-    return results.frame()
+# ----------------------------------------------------------------------------- the plan
 
 
 @dataclass
-class _Context:
+class _Plan:
+    """What a run must do: simulations (with the roles they feed), rows, and their cases."""
+
+    calibration_label: str
+    sims: dict = field(default_factory=dict)       # (scenario, content, condition, seed) -> (obj, {roles})
+    rows: dict = field(default_factory=dict)       # RowKey -> (scored Case, calibration Case)
+    ready: dict = field(default_factory=dict)      # Case -> (log, truth) given, not simulated
+
+    def add_sim(self, scenario, case: Case) -> None:
+        key = _sim_key(case)
+        self.sims.setdefault(key, (scenario, set()))[1].add(case.role)
+
+    def add_row(self, key: RowKey, case: Case, cal_case: Case) -> None:
+        self.rows[key] = (case, cal_case)
+
+
+def _sim_key(case: Case) -> tuple:
+    return case.scenario, case.content, case.condition, case.seed
+
+
+@dataclass(frozen=True)
+class _Fit:
+    method: str
+    calibration: Case
+
+
+@dataclass
+class _State:
+    """Everything the scheduler tracks; the truth lives here only."""
+
+    plan: _Plan
     registry: Registry
     results: ResultsFile
-    calibration_of: dict
-    paths: dict
-    calibration_label: str
+    cache: Path
     log_dir: Path | None
     timeout: float | None
     run_id: str
+    pending: list
+    sims: dict = field(default_factory=dict)        # sim key -> "pending" | "running" | "done" | "failed: ..."
+    artefacts: dict = field(default_factory=dict)   # Case -> Artefact
+    truths: dict = field(default_factory=dict)      # Case -> Truth (scored cases with pending rows)
+    fits: dict = field(default_factory=dict)        # _Fit -> "pending" | "running" | info dict
+    lengths: dict = field(default_factory=dict)     # Case -> (n_samples, n_ticks)
+    open_rows: dict = field(default_factory=dict)   # scored Case -> rows not yet recorded
 
 
-def _schedule(pool, rows, sim_jobs, state, ctx, bar) -> None:
-    pending = list(rows)
+def _execute(registry, plan: _Plan, *, out, jobs, timeout, memory_mb, resume, progress, config,
+             on_start=None):
+    with _run_dir(out, resume, config) as out_dir:
+        if on_start is not None:
+            on_start()
+        results = ResultsFile(out_dir / "results.csv" if out_dir else None, resume=resume)
+        if resume:
+            _say_retried(results.drop_environmental(), out_dir)
+        done = results.done_keys()
+        rows = sorted(k for k in plan.rows if (k.method, k.scenario, k.condition, k.seed) not in done)
+        with tempfile.TemporaryDirectory(prefix="rippleb-cache-") as cache:
+            state = _State(plan, registry, results, Path(cache), _log_dir(out_dir), timeout,
+                           time.strftime("%Y%m%dT%H%M%S"), rows)
+            _prepare_cases(state)
+            with _progress(len(rows), progress) as bar, _sigterm_as_interrupt():
+                _schedule(Pool(int(jobs), memory_mb), state, bar)
+        results.flush()
+    return results.frame()
+
+
+def _say_retried(dropped: list[dict], out_dir) -> None:
+    if dropped:
+        reasons = sorted({str(r.get("message", ""))[len(ENVIRONMENT):][:60] for r in dropped})
+        warnings.warn(f"{out_dir}/results.csv: running {len(dropped)} row(s) again that failed for an "
+                      f"environmental reason ({'; '.join(reasons)})", RunWarning, stacklevel=3)
+
+
+def _prepare_cases(state: _State) -> None:
+    needed = {c for key in state.pending for c in state.plan.rows[key]}
+    for case in needed:
+        if case in state.plan.ready:
+            log, truth = state.plan.ready[case]
+            state.artefacts[case] = store(state.cache / case.file_name(),
+                                          log_bytes(job_fns.visible_log(log, case.role)))
+            if truth is not None:
+                state.truths[case] = truth
+            state.lengths[case] = _lengths(log)
+    state.sims = {_sim_key(c): "pending" for c in needed if c not in state.plan.ready}
+    state.fits = {_Fit(k.method, state.plan.rows[k][1]): "pending" for k in state.pending}
+    for key in state.pending:
+        case = state.plan.rows[key][0]
+        state.open_rows[case] = state.open_rows.get(case, 0) + 1
+
+
+def _lengths(log: SensorLog) -> tuple[int, int]:
+    return len(log), -(-len(log) // log.spec.block_size)
+
+
+# ----------------------------------------------------------------------------- scheduling
+
+
+def _schedule(pool: Pool, state: _State, bar) -> None:
     try:
-        while pending or pool.busy:
-            while pool.free and pending:
-                if not _start_next(pool, pending, sim_jobs, state, ctx, bar):
+        while state.pending or pool.busy:
+            while pool.free and state.pending:
+                if not _start_next(pool, state, bar):
                     break
             for fin in pool.wait():
-                if isinstance(fin.key, _Case):
-                    ok = fin.kind == "done" and ctx.paths[fin.key].is_file()
-                    state[fin.key] = "done" if ok else f"failed: {_why(fin)}"
+                if isinstance(fin.key, tuple):
+                    _finish_sim(fin, state)
                 elif isinstance(fin.key, _Fit):
-                    state[fin.key] = _fit_outcome(fin, ctx)
+                    state.fits[fin.key] = _fit_outcome(fin, state)
                 else:
-                    _finish_row(fin, ctx, bar)
+                    _finish_row(fin, state, bar)
     finally:
         pool.kill_all()
 
 
-def _start_next(pool, pending, sim_jobs, state, ctx, bar) -> bool:
-    """Start one job: the first row whose simulations exist, else the next simulation."""
-    for row in pending:
-        cases = (_Case(row.scenario, row.seed), ctx.calibration_of[row])
-        failed = [state[c] for c in cases if state[c].startswith("failed")]
+def _start_next(pool: Pool, state: _State, bar) -> bool:
+    """Start one job: the first row whose inputs exist, else its fit, else the next simulation."""
+    for key in list(state.pending):
+        case, cal_case = state.plan.rows[key]
+        failed = [state.sims.get(_sim_key(c), "") for c in (case, cal_case)]
+        failed = [f for f in failed if f.startswith("failed")]
         if failed:
-            pending.remove(row)
-            ctx.results.add(_row_dict(row, ctx, status="error",
-                                      message=f"simulation {failed[0]}"))
-            bar.update()
+            _record(state, key, bar, status="error", message=f"simulation {failed[0]}")
             return True
-        if all(state[c] == "done" for c in cases):
-            fit = _Fit(row.method, ctx.calibration_of[row])
-            if state[fit] == "pending":
-                state[fit] = "running"
-                output = str(ctx.log_dir / f"fit--{_safe(row.method)}--{row.seed}.txt") if ctx.log_dir else None
-                pool.submit(fit, _fit_job(fit, ctx), ctx.timeout, output)
-                return True
-            if state[fit] == "running":
-                continue
-            pending.remove(row)
-            if state[fit]["status"] != "ok":
-                ctx.results.add(_row_dict(row, ctx, **state[fit]))
-                bar.update()
-                return True
-            output = str(ctx.log_dir / f"{_safe(row.method)}--{_safe(row.scenario)}--{row.seed}.txt") \
-                if ctx.log_dir else None
-            pool.submit(row, _row_job(row, ctx, state[fit]), ctx.timeout, output)
+        if not all(c in state.artefacts for c in (case, cal_case)):
+            continue
+        fit = _Fit(key.method, cal_case)
+        if state.fits[fit] == "pending":
+            state.fits[fit] = "running"
+            pool.submit(fit, _fit_job(fit, state), state.timeout, _output(state, f"fit--{key.method}--{key.seed}"))
             return True
-    for case, st in state.items():
-        if isinstance(case, _Case) and st == "pending":
-            state[case] = "running"
-            scenario, seed = sim_jobs[case]
-            pool.submit(case, _sim_job(scenario, seed, ctx.paths[case]), None, None)
+        if state.fits[fit] == "running":
+            continue
+        state.pending.remove(key)
+        if state.fits[fit]["status"] != "ok":
+            _record(state, key, bar, **_row_fields(state.fits[fit]))
+            return True
+        n_samples, _ = state.lengths[case]
+        pool.submit(key, _row_job(key, state, state.fits[fit]), state.timeout,
+                    _output(state, f"{key.method}--{key.scenario}--{key.condition}--{key.seed}"),
+                    max_bytes=24 * n_samples + 2**20)
+        return True
+    for sim, st in state.sims.items():
+        if st == "pending":
+            state.sims[sim] = "running"
+            scenario, roles = state.plan.sims[sim]
+            paths = {role: str(state.cache / Case(*sim, role).file_name()) for role in roles}
+            pool.submit(sim, _sim_job(scenario, sim, paths), None, None)
             return True
     return False
 
 
-def _sim_job(scenario, seed, path):
-    def job():
-        from rippleb.simulator import simulate
+def _output(state: _State, stem: str) -> str | None:
+    from rippleb.rows import safe_name
 
-        sim = simulate(scenario, seed)
-        save_case(path, sim.log, Truth.from_simulation(sim))
+    return str(state.log_dir / f"{safe_name(stem)}.txt") if state.log_dir else None
+
+
+def _sim_job(scenario, sim: tuple, paths: dict):
+    def job():
+        return job_fns.simulate_case(scenario, sim[3], sim[2], paths)
     return job
 
 
-def _fit_job(fit, ctx):
-    cal_path, out_path = ctx.paths[fit.calibration], ctx.paths[fit]
-    entry = ctx.registry.get(fit.method)
+def _finish_sim(fin, state: _State) -> None:
+    if fin.kind != "done":
+        state.sims[fin.key] = f"failed: {_why(fin, state)}"
+        return
+    arrays, info = unpack(fin.value)
+    for role, ref in info["artefacts"].items():
+        case = Case(*fin.key, role)
+        state.artefacts[case] = Artefact(ref["path"], ref["sha256"])
+        if role == SCORED:
+            truth = job_fns.truth_from_message(arrays, info)
+            state.truths[case] = truth
+            n_samples = len(truth.eval_mask)
+            state.lengths[case] = (n_samples, -(-n_samples // int(info["block_size"])))
+    state.sims[fin.key] = "done"
+
+
+def _fit_job(fit: _Fit, state: _State):
+    calibration = state.artefacts[fit.calibration]
+    path = state.cache / f"fit-{digest(repr(fit).encode())[:32]}.pkl"
+    registry = state.registry
 
     def job():
-        return fit_and_save(entry.load(), load_case(cal_path)[0], out_path)
+        return job_fns.fit_method(fit.method, None, calibration, path, registry)
     return job
 
 
-def fit_and_save(cls, calibration: SensorLog, path: Path) -> dict:
-    """Fit a new ``cls`` on ``calibration`` and pickle it to ``path``; return ``status``,
-    ``message``, ``params``, ``fit_s`` and whether it was ``pickled``."""
-    result = {"status": "ok", "message": "", "params": ""}
-    t0 = time.perf_counter()
-    try:
-        method = cls()
-        result["params"] = _params_json(method)
-        method.fit(calibration.for_method(keep_ref=True))
-    except Exception as exc:  # the fit's failure becomes the status of each of its rows
-        import traceback
-
-        traceback.print_exc()
-        return {**result, "status": "error", "message": one_line(exc)}
-    result["fit_s"] = time.perf_counter() - t0
-    try:
-        blob = pickle.dumps(method, protocol=pickle.HIGHEST_PROTOCOL)
-    except Exception:  # not picklable (a lambda, a handle): its rows fit it themselves
-        return {**result, "pickled": False}
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(blob)
-    return {**result, "pickled": True}
-
-
-def _fit_outcome(fin, ctx) -> dict:
+def _fit_outcome(fin, state: _State) -> dict:
     if fin.kind == "done":
-        return fin.value
+        try:
+            return unpack(fin.value)[1]
+        except Exception as exc:  # noqa: BLE001 - whatever a fit sends, it is one status line
+            return {"status": "error", "message": f"fit sent an unreadable result ({type(exc).__name__})"}
     if fin.kind == "timeout":
-        return {"status": "timeout", "message": f"fit killed after {ctx.timeout:g} s"}
-    return {"status": "error", "message": f"fit: {_why(fin)}"}
+        return {"status": "timeout", "message": f"fit killed after {state.timeout:g} s"}
+    return {"status": "error", "message": f"fit: {_why(fin, state)}"}
 
 
-def _row_job(row, ctx, fit: dict):
-    cal_path, eval_path = ctx.paths[ctx.calibration_of[row]], ctx.paths[_Case(row.scenario, row.seed)]
-    fitted_path = ctx.paths[_Fit(row.method, ctx.calibration_of[row])]
-    entry = ctx.registry.get(row.method)
+def _row_job(key: RowKey, state: _State, fit: dict):
+    case, cal_case = state.plan.rows[key]
+    evaluation, calibration = state.artefacts[case], state.artefacts[cal_case]
+    fitted = Artefact(**fit["fitted"]) if isinstance(fit.get("fitted"), dict) else None
+    fit_info = {k: fit[k] for k in ("params", "fit_s") if k in fit} if fitted else None
+    registry = state.registry
 
     def job():
-        if not fit.get("pickled"):
-            return evaluate(entry.load(), load_case(cal_path)[0], *load_case(eval_path))
-        entry.load()  # import the method's module before unpickling its instance
-        method = pickle.loads(fitted_path.read_bytes())
-        evaluation, truth = load_case(eval_path)
-        fields = {"status": "ok", "message": "", "n_samples": len(evaluation), "params": fit["params"],
-                  "fit_s": fit["fit_s"]}
-        return run_fitted(method, evaluation, truth, fields)
+        return job_fns.row_message(job_fns.run_row(key.method, None, calibration, evaluation, registry,
+                                                   fitted=fitted, fit_info=fit_info))
     return job
 
 
-def evaluate(cls, calibration: SensorLog, evaluation: SensorLog, truth: Truth, params=None) -> dict:
-    """One row's result fields: status, message, metrics, timing, ``params``.
-
-    Runs in the row's child process; exceptions of the method become ``error``, bad
-    output ``invalid``.
-    """
-    result = {"status": "ok", "message": "", "n_samples": len(evaluation), "params": ""}
-    t0 = time.perf_counter()
-    try:
-        method = cls(**(params or {}))
-        result["params"] = _params_json(method)
-        method.fit(calibration.for_method(keep_ref=True))
-        result["fit_s"] = time.perf_counter() - t0
-    except Exception as exc:  # any failure of the method is its row's status, never the run's
-        import traceback
-
-        traceback.print_exc()
-        return {**result, "status": "error", "message": one_line(exc)}
-    return run_fitted(method, evaluation, truth, result)
-
-
-def run_fitted(method, evaluation: SensorLog, truth: Truth, result: dict) -> dict:
-    """``reset`` a fitted method, stream ``evaluation`` through it and score it into ``result``."""
-    try:
-        visible = evaluation.for_method(keep_ref=False)
-        method.reset(visible.spec)
-        blocks = prepare_blocks(visible)
-        estimate, ticks = stream(method.step, blocks, len(visible))
-    except InvalidOutput as exc:
-        return {**result, "status": "invalid", "message": str(exc)}
-    except Exception as exc:  # any failure of the method is its row's status, never the run's
-        import traceback
-
-        traceback.print_exc()
-        return {**result, "status": "error", "message": one_line(exc)}
-    result.update(score(estimate, truth))
-    result.update(tick_stats(ticks, len(visible)))
-    return result
-
-
-def _finish_row(fin, ctx, bar) -> None:
-    row = fin.key
+def _finish_row(fin, state: _State, bar) -> None:
+    key = fin.key
+    case = state.plan.rows[key][0]
     if fin.kind == "done":
-        fields = fin.value
+        fields = _score_row(fin.value, state, case)
     elif fin.kind == "timeout":
-        fields = {"status": "timeout", "message": f"killed after {ctx.timeout:g} s"}
+        fields = {"status": "timeout", "message": f"killed after {state.timeout:g} s"}
     else:
-        fields = {"status": "error", "message": _why(fin)}
-    ctx.results.add(_row_dict(row, ctx, wall_s=fin.wall_s, **fields))
+        fields = {"status": "error", "message": _why(fin, state)}
+    _record(state, key, bar, wall_s=fin.wall_s, **fields)
+
+
+def _score_row(value: bytes, state: _State, case: Case) -> dict:
+    """Score what a row sent against the truth held here; trust only its estimate."""
+    try:
+        arrays, info = unpack(value)
+    except Exception as exc:  # noqa: BLE001 - a row's bytes are untrusted
+        return {"status": "error", "message": f"the row sent an unreadable result ({type(exc).__name__})"}
+    fields = _row_fields(info)
+    if fields["status"] != "ok":
+        return fields
+    truth = state.truths[case]
+    n_samples, n_ticks = state.lengths[case]
+    checked = job_fns.check_estimate(arrays, n_samples, n_ticks)
+    if isinstance(checked, str):
+        return {**fields, "status": "invalid", "message": checked}
+    estimate, ticks = checked
+    fields["n_samples"] = n_samples
+    fields.update(score(estimate, truth))
+    fields.update(tick_stats(ticks, n_samples))
+    return fields
+
+
+def _row_fields(info: dict) -> dict:
+    """The fields a job may set, type-checked: a job cannot write metrics or keys."""
+    status = info.get("status") if info.get("status") in STATUSES else "error"
+    fields = {"status": status, "message": str(info.get("message", ""))[:500],
+              "params": str(info.get("params", ""))[:2000]}
+    fit_s = info.get("fit_s")
+    if isinstance(fit_s, (int, float)) and math.isfinite(fit_s):
+        fields["fit_s"] = float(fit_s)
+    if status != info.get("status"):
+        fields["message"] = f"the row sent an unknown status {str(info.get('status'))[:40]!r}"
+    return fields
+
+
+def _record(state: _State, key: RowKey, bar, **fields) -> None:
+    if key in state.pending:
+        state.pending.remove(key)
+    case, cal_case = state.plan.rows[key]
+    row = {"method": key.method, "scenario": key.scenario, "condition": key.condition, "seed": key.seed,
+           **fields, "calibration": state.plan.calibration_label, "scenario_sha256": case.content,
+           **system_info(), "run_id": state.run_id}
+    state.results.add(row)
     bar.update()
+    # The truth of a case is kept only while rows of it are open.
+    state.open_rows[case] -= 1
+    if not state.open_rows[case]:
+        state.truths.pop(case, None)
 
 
-def _row_dict(row, ctx, **fields) -> dict:
-    return {"method": row.method, "scenario": row.scenario, "seed": row.seed, **fields,
-            "calibration": ctx.calibration_label, **system_info(), "run_id": ctx.run_id}
-
-
-def _why(fin) -> str:
+def _why(fin, state: _State) -> str:
     if fin.kind == "raised":
-        return fin.value
-    if fin.kind == "died":
-        code = fin.value
-        if code is not None and code < 0:
-            return f"process killed by signal {signal.Signals(-code).name} (memory limit or crash?)"
-        return f"process exited with code {code} before reporting"
-    return fin.kind
+        text = fin.value
+        if any(marker in text for marker in ("No space left", "Disk quota")):
+            return f"{ENVIRONMENT}{text}"
+        return text
+    if fin.kind == "timeout":
+        return f"killed after {state.timeout:g} s"
+    if fin.kind == "oversized":
+        return f"sent {fin.value} bytes, more than a row's result can hold"
+    code = fin.value
+    if code is not None and code < 0:
+        name = signal.Signals(-code).name
+        if -code == signal.SIGKILL:  # not our timeout: the OOM killer or a user
+            return f"{ENVIRONMENT}process killed by {name} (out of memory, or killed from outside)"
+        return f"process killed by signal {name} (a crash?)"
+    return f"process exited with code {code} before reporting"
 
 
-def save_case(path: Path, log: SensorLog, truth: Truth) -> None:
-    """Store a log and its truth as plain arrays (no pickle), atomically."""
-    arrays = {name: values for name, values in log.columns().items()}
-    arrays.update({name: getattr(truth, name) for name in _ARRAYS})
-    arrays["spec"] = np.array(json.dumps(asdict(log.spec)))
-    arrays["meta"] = np.array(json.dumps(log.meta, default=str))
-    with atomic_path(path) as tmp:
-        np.savez(tmp, **arrays)
+# ----------------------------------------------------------------------------- the run directory
 
 
-def load_case(path: Path) -> tuple[SensorLog, Truth]:
-    """The log and truth stored by :func:`save_case`."""
-    with np.load(path, allow_pickle=False) as data:
-        spec = JointSpec(**json.loads(str(data["spec"])))
-        cols = {name: data[name] for name in data.files if name not in _ARRAYS + ("spec", "meta")}
-        log = SensorLog(spec=spec, meta=json.loads(str(data["meta"])), **cols)
-        truth = Truth(fs=spec.fs, torque_true=log.torque_true, torque_ref=log.torque_ref,
-                      **{name: data[name] for name in _ARRAYS})
-    return log, truth
-
-
-def _prepare_out(out, resume: bool, config: dict) -> Path | None:
+@contextlib.contextmanager
+def _run_dir(out, resume: bool, config: dict):
+    """Create (or, to resume, check) the run directory and hold its lock while the run writes."""
     if out is None:
-        return None
+        yield None
+        return
     out = Path(out)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -449,38 +563,60 @@ def _prepare_out(out, resume: bool, config: dict) -> Path | None:
         probe.unlink()
     except OSError as exc:
         raise InputError(f"{out}: cannot write the output directory: {exc.strerror or exc}") from None
-    if resume and not (out / "results.csv").is_file():
-        raise InputError(f"{out}: nothing to resume (no results.csv)")
-    if not resume:
-        (out / "run.json").write_text(json.dumps(config, indent=1) + "\n")
-    return out
+    with _locked(out):
+        if resume:
+            _check_resume(out, config)
+        else:
+            kept = sorted(p.name for p in out.iterdir() if p.name != ".lock")
+            if kept:
+                raise InputError(f"{out}: not empty (holds {', '.join(kept[:3])}"
+                                 f"{', ...' if len(kept) > 3 else ''}); finish that run with "
+                                 f"--resume {out}, or choose another --out")
+            with atomic_path(out / "run.json") as tmp:
+                tmp.write_text(json.dumps(config, indent=1) + "\n")
+        yield out
+
+
+@contextlib.contextmanager
+def _locked(out: Path):
+    handle = open(out / ".lock", "a")
+    try:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise InputError(f"{out}: another rippleb run is writing this directory; wait for it to "
+                             f"end or choose another --out") from None
+        yield
+    finally:
+        handle.close()
+
+
+def _check_resume(out: Path, config: dict) -> None:
+    saved = read_config(out)
+    saved.setdefault("conditions", [DEFAULT_CONDITION])
+    differ = [name for name in ("methods", "scenarios", "conditions", "seeds", "log")
+              if saved.get(name) != config.get(name)]
+    if differ:
+        name = differ[0]
+        raise InputError(f"{out / 'run.json'}: --resume finishes the run it describes ({name} "
+                         f"{saved.get(name)}, asked {config.get(name)}); drop the selection options "
+                         f"or choose another --out")
 
 
 def read_config(out) -> dict:
     """The selection saved by a run in ``out/run.json`` (for ``--resume``)."""
     path = Path(out) / "run.json"
+    if not path.is_file():
+        raise InputError(f"{Path(out)}: nothing to resume (no run.json: no run was started there)")
     try:
         config = json.loads(path.read_text())
     except (OSError, ValueError) as exc:
         raise InputError(f"{path}: cannot resume this run: {getattr(exc, 'strerror', None) or exc}") from None
-    if not isinstance(config, dict) or "methods" not in config:
+    if not isinstance(config, dict) or not isinstance(config.get("methods"), list):
         raise InputError(f"{path}: not a rippleb run file")
+    if "log" in config:
+        raise InputError(f"{path}: a run on a recorded log cannot be resumed; run it again")
     return config
-
-
-@contextlib.contextmanager
-def _cache_dir(out_dir: Path | None):
-    if out_dir is None:
-        with tempfile.TemporaryDirectory(prefix="rippleb-") as tmp:
-            yield Path(tmp)
-        return
-    cache = out_dir / ".cache"
-    cache.mkdir(exist_ok=True)
-    yield cache
-    # Only a completed run drops its cache; an interrupted one keeps it for --resume.
-    for path in cache.iterdir():
-        path.unlink()
-    cache.rmdir()
 
 
 def _log_dir(out_dir: Path | None) -> Path | None:
@@ -516,13 +652,6 @@ def _sigterm_as_interrupt():
         signal.signal(signal.SIGTERM, previous)
 
 
-def _split(value) -> list[str]:
-    if value is None:
-        return []
-    items = value.split(",") if isinstance(value, str) else list(value)
-    return [str(i).strip() for i in items if str(i).strip()]
-
-
 def _seed_list(seeds, seed_start: int) -> list[int]:
     if isinstance(seeds, (int, np.integer)):
         if seeds < 1:
@@ -531,18 +660,31 @@ def _seed_list(seeds, seed_start: int) -> list[int]:
             raise InputError(f"--seed-start must be a non-negative integer, got {seed_start}")
         return list(range(seed_start, seed_start + int(seeds)))
     seeds = [int(s) for s in seeds]
+    if not seeds:
+        raise InputError("no seeds given")
     if any(s < 0 for s in seeds):
         raise InputError(f"seeds must be non-negative integers, got {min(seeds)}")
-    return seeds
+    return list(dict.fromkeys(seeds))
 
 
-def _params_json(method) -> str:
-    try:
-        return json.dumps(method.get_params(), sort_keys=True, default=repr)
-    except Exception:  # a broken get_params must not cost the row
-        return ""
+# ----------------------------------------------------------------------------- in-process helpers
 
 
-def _safe(text: str) -> str:
-    """A file-name fragment that cannot leave its directory."""
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).lstrip(".") or "_"
+def evaluate(cls, calibration: SensorLog, evaluation: SensorLog, truth: Truth, params=None) -> dict:
+    """One row's result fields in this process (tests and tools; the runner isolates rows).
+
+    Fits ``cls(**params)`` on ``calibration``, streams ``evaluation`` and scores it
+    against ``truth``; failures of the method become ``error``, bad output ``invalid``.
+    """
+    from rippleb.registry import Entry
+
+    class _One:
+        def get(self, name):
+            return Entry(name, "builtin", "evaluate", cls=cls)
+
+    result = job_fns.run_row(getattr(cls, "name", "method"), params, calibration, evaluation, _One())
+    fields = result["info"]
+    if fields["status"] == "ok":
+        fields.update(score(result["estimate"], truth))
+        fields.update(tick_stats(result["ticks"], len(evaluation)))
+    return fields

@@ -38,7 +38,18 @@ def test_list_shows_methods_and_scenarios():
     (["simulate", "paper-quintic", "--out", "x.txt"], "unsupported log format"),
     (["report", "missing-dir"], "no results.csv"),
     (["run", "--log", "missing.csv"], "no such file"),
-    (["run", "--resume", "missing-dir"], "cannot resume"),
+    (["run", "--resume", "missing-dir"], "nothing to resume"),
+    (["run", "--timeout", "-1"], "--timeout must be a positive number"),
+    (["run", "--timeout", "nan"], "--timeout must be a positive number"),
+    (["run", "--memory-limit", "-1"], "--memory-limit must be a positive number"),
+    (["run", "--jobs", "0"], "--jobs must be a whole number of at least 1"),
+    (["run", "--methods", ""], "--methods is empty"),
+    (["run", "--methods", " , "], "--methods is empty"),
+    (["run", "--scenarios", ""], "--scenarios is empty"),
+    (["run", "--conditions", ""], "--conditions is empty"),
+    (["run", "--conditions", "sunny"], "unknown condition 'sunny'"),
+    (["simulate", "paper-quintic", "--condition", "agd", "--out", "x.csv"], "did you mean 'aged'"),
+    (["simulate", "paper-quintic", "--seed", "-1", "--out", "x.csv"], "--seed must be a non-negative"),
 ])
 def test_errors_are_one_line_exit_2(tmp_path, args, message):
     proc = rippleb(*args, cwd=tmp_path)

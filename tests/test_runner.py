@@ -16,7 +16,7 @@ from rippleb.results import COLUMNS
 N = 4000  # 0.2 s at 20 kHz: 200 ticks
 
 
-def fake_simulate(scenario, seed):
+def fake_simulate(scenario, seed, condition="same-session"):
     """A tiny simulation: torque is a slow sine, strain carries it plus an order-4 ripple."""
     name = getattr(scenario, "name", scenario)
     rng = np.random.default_rng([seed, len(name)])
@@ -152,7 +152,7 @@ def test_misbehaving_methods_get_their_status_and_the_others_complete(fake, tmp_
     # every row on disk too, with the standard columns first
     disk = pd.read_csv(tmp_path / "results.csv")
     assert list(disk.columns[: len(COLUMNS)]) == list(COLUMNS) and len(disk) == len(frame)
-    assert "debug output" in (tmp_path / "logs" / "chatty--paper-quintic--0.txt").read_text()
+    assert "debug output" in (tmp_path / "logs" / "chatty--paper-quintic--same-session--0.txt").read_text()
 
 
 def test_metrics_and_provenance_of_an_ok_row(fake, tmp_path):
@@ -168,10 +168,10 @@ def test_metrics_and_provenance_of_an_ok_row(fake, tmp_path):
 def test_each_simulation_runs_once_per_run(fake, tmp_path, monkeypatch):
     calls = tmp_path / "calls"
 
-    def counting(scenario, seed):
+    def counting(scenario, seed, condition="same-session"):
         with open(calls, "a") as fh:   # children are processes: count through a file
             fh.write(f"{getattr(scenario, 'name', scenario)}/{seed}\n")
-        return fake_simulate(scenario, seed)
+        return fake_simulate(scenario, seed, condition)
     import rippleb.simulator
     monkeypatch.setattr(rippleb.simulator, "simulate", counting)
     rippleb.run(methods="raw,perfect,chatty", scenarios="paper-quintic,creep", seeds=2, jobs=2)
@@ -182,7 +182,7 @@ def test_each_simulation_runs_once_per_run(fake, tmp_path, monkeypatch):
 def test_a_failed_simulation_costs_its_rows_only(fake, monkeypatch):
     import rippleb.simulator
 
-    def flaky(scenario, seed):
+    def flaky(scenario, seed, condition="same-session"):
         if getattr(scenario, "name", scenario) == "creep":
             raise ValueError("bad trajectory")
         return fake_simulate(scenario, seed)
@@ -194,10 +194,18 @@ def test_a_failed_simulation_costs_its_rows_only(fake, monkeypatch):
 
 
 def test_resume_runs_only_the_missing_rows(fake, tmp_path):
-    first = rippleb.run(methods="raw", scenarios="paper-quintic", seeds=1, out=tmp_path)
+    first = rippleb.run(methods="raw,perfect", scenarios="paper-quintic", seeds=1, out=tmp_path)
+    disk = pd.read_csv(tmp_path / "results.csv")
+    disk[disk.method == "raw"].to_csv(tmp_path / "results.csv", index=False)  # as if interrupted
     both = rippleb.run(methods="raw,perfect", scenarios="paper-quintic", seeds=1, out=tmp_path, resume=True)
-    assert len(both) == 2
-    assert both.set_index("method").loc["raw", "run_id"] == first.loc[0, "run_id"]
+    assert list(both.method) == ["perfect", "raw"]
+    assert both.set_index("method").loc["raw", "run_id"] == first.set_index("method").loc["raw", "run_id"]
+
+
+def test_resume_refuses_another_selection(fake, tmp_path):
+    rippleb.run(methods="raw", scenarios="paper-quintic", seeds=1, out=tmp_path)
+    with pytest.raises(InputError, match="run.json: --resume finishes the run it describes"):
+        rippleb.run(methods="raw", scenarios="paper-quintic", seeds=1, seed_start=5, out=tmp_path, resume=True)
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])

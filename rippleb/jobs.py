@@ -1,0 +1,158 @@
+"""The jobs of a run as plain functions, so any executor can run them.
+
+* :func:`simulate_case` runs the simulator (rippleb's code only) and splits its output
+  into what a method may see (written to a hashed cache file) and the truth (returned,
+  for the runner to keep in memory).
+* :func:`fit_method` fits a method on a visible calibration log and pickles it.
+* :func:`run_row` is the row job: ``(method name, params, visible calibration log or its
+  artefact, visible evaluation log or its artefact[, fitted artefact]) -> (fit info,
+  estimate, tick times)``. It never receives the truth; the runner scores the estimate.
+
+Artefacts are verified (:class:`rippleb.cache.Artefact`) *before* the method's code is
+imported, so a method cannot rewrite an input between verification and use by earlier
+code of its own. The forked pool (:mod:`rippleb.pool`) inherits the registry; another
+executor passes one.
+"""
+
+from __future__ import annotations
+
+import json
+import pickle
+import time
+import traceback
+
+import numpy as np
+
+from rippleb.cache import Artefact, load_log, log_bytes, pack, store
+from rippleb.data import SensorLog
+from rippleb.metrics import Truth
+from rippleb.registry import one_line
+from rippleb.rows import FITTING, SCORED
+from rippleb.streaming import InvalidOutput, prepare_blocks, stream
+
+TRUTH_ARRAYS = ("moving", "wave_angle", "eval_mask", "torque_true", "torque_ref")
+
+
+def visible_log(log: SensorLog, role: str) -> SensorLog:
+    """What a method may see of ``log``: a calibration keeps ``torque_ref``, a scored log
+    keeps neither reference; ``torque_true`` never."""
+    return log.for_method(keep_ref=(role == FITTING))
+
+
+def simulate_case(scenario, seed: int, condition: str, paths: dict) -> bytes:
+    """Simulate once; store the visible log of each role in ``paths`` (role -> path).
+
+    Returns :func:`rippleb.cache.pack` bytes: the truth arrays and, in ``info``, the
+    ``fs`` and each role's artefact (path and hash).
+    """
+    from rippleb.simulator import simulate
+
+    sim = simulate(scenario, seed, condition=condition)
+    truth = Truth.from_simulation(sim)
+    artefacts = {role: _store_log(path, visible_log(sim.log, role)) for role, path in paths.items()}
+    return truth_message(truth, artefacts, sim.log.spec.block_size)
+
+
+def _store_log(path, log: SensorLog) -> dict:
+    artefact = store(path, log_bytes(log))
+    return {"path": artefact.path, "sha256": artefact.sha256}
+
+
+def truth_message(truth: Truth, artefacts: dict, block_size: int) -> bytes:
+    """The truth, the tick size and the artefacts of one case as message bytes."""
+    arrays = {name: getattr(truth, name) for name in TRUTH_ARRAYS}
+    return pack(arrays, {"fs": truth.fs, "block_size": int(block_size), "artefacts": artefacts})
+
+
+def truth_from_message(arrays: dict, info: dict) -> Truth:
+    """The :class:`Truth` sent by :func:`simulate_case`."""
+    return Truth(fs=float(info["fs"]), **{name: arrays.get(name) for name in TRUTH_ARRAYS})
+
+
+def fit_method(method: str, params: dict | None, calibration, out_path, registry) -> bytes:
+    """Fit ``method`` on ``calibration`` and pickle it to ``out_path``.
+
+    Returns message bytes whose info holds ``status``, ``message``, ``params``,
+    ``fit_s`` and, if the fitted method could be pickled, its artefact ``fitted``.
+    """
+    calibration = load_log(calibration)  # verified before any method code runs
+    info = {"status": "ok", "message": "", "params": ""}
+    try:
+        cls = registry.get(method).load()
+        fitted, info["params"], info["fit_s"] = _fit(cls, params, calibration)
+    except Exception as exc:  # the fit's failure becomes the status of each of its rows
+        traceback.print_exc()
+        return pack({}, {**info, "status": "error", "message": one_line(exc)})
+    try:
+        blob = pickle.dumps(fitted, protocol=pickle.HIGHEST_PROTOCOL)
+    except Exception:  # not picklable (a lambda, a handle): its rows fit it themselves
+        return pack({}, info)
+    artefact = store(out_path, blob)
+    return pack({}, {**info, "fitted": {"path": artefact.path, "sha256": artefact.sha256}})
+
+
+def _fit(cls, params, calibration: SensorLog):
+    t0 = time.perf_counter()
+    method = cls(**(params or {}))
+    params_text = params_json(method)
+    method.fit(calibration.for_method(keep_ref=True))
+    return method, params_text, time.perf_counter() - t0
+
+
+def run_row(method: str, params: dict | None, calibration, evaluation, registry,
+            fitted: Artefact | None = None, fit_info: dict | None = None) -> dict:
+    """The row job: fit (or load the fitted method), ``reset``, stream ``evaluation``.
+
+    Returns a dict with ``info`` (status, message, params, fit_s, n_samples), and for an
+    ``ok`` row the ``estimate`` [Nm] and ``ticks`` (ns per ``step`` call).
+    """
+    evaluation = visible_log(load_log(evaluation), SCORED)
+    blob = fitted.read() if fitted is not None else None
+    calibration = load_log(calibration) if fitted is None else None
+    info = {"status": "ok", "message": "", "params": "", "n_samples": len(evaluation), **(fit_info or {})}
+    try:
+        cls = registry.get(method).load()
+        if blob is not None:
+            instance = pickle.loads(blob)  # the method's own pickle, verified by hash
+        else:
+            instance, info["params"], info["fit_s"] = _fit(cls, params, calibration)
+        instance.reset(evaluation.spec)
+        estimate, ticks = stream(instance.step, prepare_blocks(evaluation), len(evaluation))
+    except InvalidOutput as exc:
+        return {"info": {**info, "status": "invalid", "message": str(exc)}}
+    except Exception as exc:  # any failure of the method is its row's status, never the run's
+        traceback.print_exc()
+        return {"info": {**info, "status": "error", "message": one_line(exc)}}
+    return {"info": info, "estimate": estimate, "ticks": ticks}
+
+
+def row_message(result: dict) -> bytes:
+    """:func:`run_row`'s result as message bytes."""
+    return pack({k: result[k] for k in ("estimate", "ticks") if k in result}, result["info"])
+
+
+def params_json(method) -> str:
+    """A method's ``get_params()`` as sorted JSON ('' if it cannot say)."""
+    try:
+        return json.dumps(method.get_params(), sort_keys=True, default=repr)
+    except Exception:  # a broken get_params must not cost the row
+        return ""
+
+
+def check_estimate(arrays: dict, n_samples: int, n_ticks: int) -> tuple[np.ndarray, np.ndarray] | str:
+    """The estimate and ticks a row sent, or why they cannot be scored (one line).
+
+    The runner re-checks in its own process what the streaming loop checked in the
+    row's: a row that claims ``ok`` with a wrong-length or non-finite estimate is
+    ``invalid``, whatever it says.
+    """
+    estimate, ticks = arrays.get("estimate"), arrays.get("ticks")
+    if estimate is None or ticks is None:
+        return "the row sent no estimate"
+    if estimate.dtype.kind != "f" or estimate.shape != (n_samples,):
+        return f"estimate of shape {estimate.shape} dtype {estimate.dtype}, expected {n_samples} floats"
+    if not np.isfinite(estimate).all():
+        return "estimate holds NaN/inf values"
+    if ticks.dtype.kind not in "iu" or ticks.shape != (n_ticks,):
+        return f"tick times of shape {ticks.shape}, expected {n_ticks}"
+    return estimate, ticks

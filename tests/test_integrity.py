@@ -1,0 +1,260 @@
+"""Integrity against a hostile plugin package, through the real CLI.
+
+The package is installed as a distribution (a ``.dist-info`` directory with entry points)
+in a site directory put on ``PYTHONPATH`` of the ``rippleb`` subprocess only, so the test
+environment itself is unchanged. Each plugin attacks one promise: rows forged through the
+cache, truth read from the cache, processes left behind, the runner signalled, imports
+that hang or exit.
+"""
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+pytestmark = pytest.mark.slow
+
+HOSTILE = textwrap.dedent('''
+    import glob, io, os, signal, subprocess, sys, tempfile, time
+    import numpy as np
+    from rippleb import Method
+
+    def _cache_files():
+        return glob.glob(os.path.join(tempfile.gettempdir(), "rippleb-cache-*", "*"))
+
+    class Forger(Method):
+        """Rewrites every cached log it can find: the strain of every other row x 100."""
+        name = "forger"
+        def fit(self, calibration):
+            for path in _cache_files():
+                try:
+                    os.chmod(path, 0o644)
+                    with np.load(path, allow_pickle=False) as npz:
+                        arrays = {k: npz[k] for k in npz.files}
+                    if "strain" in arrays:
+                        arrays["strain"] = arrays["strain"] * 100.0
+                    buf = io.BytesIO()
+                    np.savez(buf, **arrays)
+                    with open(path, "wb") as fh:
+                        fh.write(buf.getvalue())
+                except Exception:
+                    pass
+        def step(self, block):
+            return block.strain * 0.0
+
+    class Peeker(Method):
+        """Returns torque_true if it can find it anywhere in the cache."""
+        name = "peeker"
+        def reset(self, spec):
+            self.truth, self.pos = None, 0
+            for path in _cache_files():
+                try:
+                    with np.load(path, allow_pickle=False) as npz:
+                        if "torque_true" in npz.files:
+                            self.truth = npz["torque_true"]
+                except Exception:
+                    pass
+        def step(self, block):
+            n = len(block)
+            if self.truth is not None and len(self.truth) >= self.pos + n:
+                out = self.truth[self.pos:self.pos + n]
+            else:
+                out = np.zeros(n)
+            self.pos += n
+            return out
+
+    class Spawner(Method):
+        """Leaves a detached process, and a forked grandchild in its own session."""
+        name = "spawner"
+        def fit(self, calibration):
+            subprocess.Popen(["sleep", "987"], start_new_session=True)
+            if os.fork() == 0:
+                os.setsid()
+                os.execvp("sleep", ["sleep", "988"])
+            time.sleep(0.2)
+            open(os.environ["HOSTILE_PIDS"], "a").close()
+        def step(self, block):
+            return block.strain * 0.0
+
+    def _ancestors():
+        pid, found = os.getpid(), []
+        while pid > 1:
+            with open(f"/proc/{pid}/stat") as fh:
+                pid = int(fh.read().rsplit(")", 1)[1].split()[1])
+            try:
+                with open(f"/proc/{pid}/cmdline", "rb") as fh:
+                    found.append((pid, fh.read().replace(b"\\0", b" ").decode()))
+            except OSError:
+                break
+        return found
+
+    class Killer(Method):
+        """Signals its process group, its parent, and every ancestor that runs rippleb."""
+        name = "killer"
+        def fit(self, calibration):
+            for action in (lambda: os.killpg(0, signal.SIGTERM),
+                           lambda: os.kill(os.getppid(), signal.SIGKILL)):
+                try:
+                    action()
+                except Exception:
+                    pass
+            for pid, cmdline in _ancestors():
+                if "rippleb" in cmdline and " run" in cmdline:
+                    try:
+                        os.kill(pid, signal.SIGKILL)
+                    except Exception:
+                        pass
+        def step(self, block):
+            return block.strain * 0.0
+''')
+NAPPER = textwrap.dedent('''
+    import os, time
+    from rippleb import Method
+
+    class Napper(Method):
+        """Sleeps in its first fit ever (to be interrupted), not in later ones."""
+        name = "napper"
+        def fit(self, calibration):
+            marker = os.environ["HOSTILE_PIDS"] + ".napped"
+            if not os.path.exists(marker):
+                open(marker, "w").close()
+                time.sleep(3600)
+        def step(self, block):
+            return block.strain * 0.0
+''')
+SLOW_IMPORT = "import time\ntime.sleep(3600)\n"
+EXITS = "raise SystemExit(3)\n"
+
+
+def _dist(site: Path, dist: str, module: str, source: str, entry_points: dict[str, str]):
+    info = site / f"{dist.replace('-', '_')}-0.1.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(
+        "[rippleb.methods]\n" + "".join(f"{k} = {module}:{v}\n" for k, v in entry_points.items()))
+    (site / f"{module}.py").write_text(source)
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory):
+    site = tmp_path_factory.mktemp("hostile-site")
+    _dist(site, "rippleb-hostile", "rippleb_hostile", HOSTILE,
+          {"forger": "Forger", "peeker": "Peeker", "spawner": "Spawner", "killer": "Killer"})
+    _dist(site, "rippleb-slow", "rippleb_slow", SLOW_IMPORT, {"slow-import": "Anything"})
+    _dist(site, "rippleb-exits", "rippleb_exits", EXITS, {"exits": "Anything"})
+    _dist(site, "rippleb-napper", "rippleb_napper", NAPPER, {"napper": "Napper"})
+    return site
+
+
+def _env(site, tmp):
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]),
+            "TMPDIR": str(tmp), "HOSTILE_PIDS": str(tmp / "pids")}
+
+
+def rippleb(site, *args, tmp, timeout=600):
+    return subprocess.run([sys.executable, "-m", "rippleb", *map(str, args)], capture_output=True,
+                          text=True, env=_env(site, tmp), timeout=timeout)
+
+
+def _spawned() -> list[int]:
+    """Live processes the spawner started (``sleep 987`` / ``sleep 988``), seen from here."""
+    found = []
+    for entry in os.listdir("/proc"):
+        try:
+            with open(f"/proc/{entry}/cmdline", "rb") as fh:
+                cmdline = fh.read()
+            with open(f"/proc/{entry}/stat") as fh:
+                state = fh.read().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            continue
+        if cmdline in (b"sleep\0" + b"987\0", b"sleep\0" + b"988\0") and state != "Z":
+            found.append(int(entry))
+    return found
+
+
+def _run(site, tmp, out, methods, jobs="2"):
+    return rippleb(site, "run", "--methods", methods, "--scenarios", "static-contact", "--seeds", "1",
+                   "--jobs", jobs, "--no-progress", "--timeout", "120", "--out", out, tmp=tmp)
+
+
+def test_hostile_plugins_cannot_peek_escape_or_kill(site, tmp_path):
+    clean = _run(site, tmp_path, tmp_path / "clean", "raw,lowpass", jobs="1")
+    assert clean.returncode == 0, clean.stderr
+    reference = pd.read_csv(tmp_path / "clean" / "results.csv").set_index("method")
+    proc = _run(site, tmp_path, tmp_path / "hostile", "peeker,spawner,killer,raw,lowpass")
+    assert proc.returncode == 0, proc.stderr      # the killer did not end the run
+    rows = pd.read_csv(tmp_path / "hostile" / "results.csv").set_index("method")
+    assert sorted(rows.index) == ["killer", "lowpass", "peeker", "raw", "spawner"]
+    assert (rows.status == "ok").all(), rows.message.to_dict()
+    for method in ("raw", "lowpass"):
+        assert rows.loc[method, "rms_error_nm"] == reference.loc[method, "rms_error_nm"]
+    # the truth never reached a method: the peeker found none and scores like zeros (= the torque)
+    assert rows.loc["peeker", "rms_error_nm"] > 0.1
+    time.sleep(0.5)
+    assert (tmp_path / "pids").is_file()        # the spawner did start its processes
+    assert _spawned() == []
+    assert not list(tmp_path.glob("rippleb-cache-*"))        # the cache went with the run
+
+
+def test_a_plugin_that_rewrites_the_cache_fails_the_rows_it_tampered(site, tmp_path):
+    # One job at a time, rows in key order: the forger's fit rewrites every cached log
+    # before the other rows read theirs.
+    proc = _run(site, tmp_path, tmp_path / "forged", "forger,lowpass,raw", jobs="1")
+    assert proc.returncode == 0, proc.stderr
+    rows = pd.read_csv(tmp_path / "forged" / "results.csv").set_index("method")
+    for method in ("lowpass", "raw"):
+        assert rows.loc[method, "status"] == "error"
+        assert "SHA-256 mismatch" in rows.loc[method, "message"]
+
+
+def test_a_plugin_that_hangs_or_exits_at_import_delays_only_itself(site, tmp_path):
+    start = time.monotonic()
+    proc = rippleb(site, "list", "--import-timeout", "3", tmp=tmp_path, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert time.monotonic() - start < 60
+    lines = {line.split()[0]: line for line in proc.stdout.splitlines() if line.startswith("  ")}
+    assert "broken" in lines["slow-import"] and "longer than 3 s" in lines["slow-import"]
+    assert "broken" in lines["exits"] and "SystemExit" in lines["exits"]
+    assert "plugin" in lines["forger"]
+
+    proc = rippleb(site, "run", "--methods", "slow-import,exits,raw", "--scenarios", "static-contact",
+                   "--seeds", "1", "--jobs", "2", "--timeout", "20", "--no-progress", "--out",
+                   tmp_path / "run", tmp=tmp_path)
+    assert proc.returncode == 1 and "exits" in proc.stderr      # a requested plugin is broken
+    rows = pd.read_csv(tmp_path / "run" / "results.csv").set_index("method")
+    assert rows.loc["raw", "status"] == "ok" and rows.loc["slow-import", "status"] == "timeout"
+    assert rows.loc["exits", "status"] == "error" and "SystemExit" in rows.loc["exits", "message"]
+
+
+def test_a_running_directory_is_locked_and_an_interrupted_one_resumable(site, tmp_path):
+    out = tmp_path / "run"
+    args = [sys.executable, "-m", "rippleb", "run", "--methods", "napper,raw", "--scenarios", "static-contact",
+            "--seeds", "1", "--jobs", "1", "--no-progress", "--out", str(out)]
+    env = _env(site, tmp_path)
+    runner = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    while not (tmp_path / "pids.napped").is_file():    # the napper's fit is running: no row finished
+        assert runner.poll() is None
+        time.sleep(0.02)
+    second = subprocess.run(args[:-2] + ["--resume", str(out)], capture_output=True, text=True,
+                            timeout=120, env=env)
+    assert second.returncode == 2 and "another rippleb run is writing this directory" in second.stderr
+    runner.send_signal(signal.SIGTERM)
+    _, err = runner.communicate(timeout=60)
+    assert runner.returncode == 130, err
+    assert "no row had finished" in err and f"rippleb run --resume {out}" in err
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    refused = subprocess.run(args, capture_output=True, text=True, timeout=120, env=env)
+    assert refused.returncode == 2 and f"{out}: not empty" in refused.stderr
+    assert f"--resume {out}" in refused.stderr
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before   # nothing replaced
+    resumed = subprocess.run(args[:4] + ["--resume", str(out), "--no-progress"], capture_output=True,
+                             text=True, timeout=300, env=env)
+    assert resumed.returncode == 0, resumed.stderr
+    rows = pd.read_csv(out / "results.csv")
+    assert list(rows.method) == ["napper", "raw"] and list(rows.status) == ["ok", "ok"]

@@ -124,7 +124,7 @@ class AngleAdaptive(Method):
 
     name = "angle-adaptive"
 
-    def __init__(self, orders: tuple = (1, 2, 4, 6, 8), memory_revs: float = 10.0,
+    def __init__(self, orders: tuple = (1, 2, 4, 6, 8), memory_revs: float = 30.0,
                  prior_sd_nm: float = 0.03, floor_sd_nm: float = 1.0, min_counts: int = 2,
                  update_ticks: int = 10, adapt: bool = True):
         self.orders = orders
@@ -255,8 +255,11 @@ class AngleAdaptive(Method):
         first = len(self.pending_[0])
         all_strain = np.concatenate([self.pending_[0], strain])
         all_encoder = np.concatenate([self.pending_[1], encoder])
-        D = self.tick_
-        done = len(all_strain) // D
+        D, U = self.tick_, int(self.update_ticks)
+        # The map changes only at the end of an update period, so the ticks of an open
+        # period wait (raw) until it completes: most ticks then cost only the subtraction.
+        ticks = len(all_strain) // D
+        done = ((self.ticks_done_ + ticks) // U) * U - self.ticks_done_
         weights = [self.w_]
         starts = []  # block-relative first sample of each new map
         if done and self.adapt:
@@ -269,13 +272,12 @@ class AngleAdaptive(Method):
         self.samples_ += len(strain)
         y = self.gain_ * strain + self.offset_
         phi = angle_regressors(encoder - self.frame_, self.orders_, self.table_)
-        out = np.empty(len(strain))
-        bounds = [0] + [min(max(s, 0), len(strain)) for s in starts] + [len(strain)]
-        for w, lo, hi in zip(weights, bounds[:-1], bounds[1:]):
-            if hi > lo:
-                out[lo:hi] = y[lo:hi] - ripple(phi[lo:hi], y[lo:hi], w)
         self.w_ = weights[-1]
-        return out
+        if len(weights) == 1:
+            return y - ripple(phi, y, self.w_)
+        # the map each sample sees: the latest one solved at or before it
+        which = np.searchsorted(np.asarray(starts), np.arange(len(strain)), side="right")
+        return y - ripple(phi, y, np.asarray(weights)[which])
 
     def _learn(self, strain, encoder):
         """Fold complete ticks into the information; return the maps solved at period ends.
@@ -308,8 +310,9 @@ class AngleAdaptive(Method):
         R[lead:lead + T] = turns
         periods = grid // U
         X = X.reshape(periods, U, -1)
-        S = np.einsum("pui,puj->pij", X, X)
-        s = np.einsum("pui,pu->pi", X, Z.reshape(periods, U))
+        Xt = X.transpose(0, 2, 1)
+        S = Xt @ X  # batched BLAS; einsum would not use it
+        s = (Xt @ Z.reshape(periods, U, 1))[..., 0]
         rev = R.reshape(periods, U).sum(axis=1)
         S[0] += self.acc_info_
         s[0] += self.acc_vec_
@@ -390,7 +393,7 @@ class AngleAdaptiveFrozen(AngleAdaptive):
 
     name = "angle-adaptive-frozen"
 
-    def __init__(self, orders: tuple = (1, 2, 4, 6, 8), memory_revs: float = 10.0,
+    def __init__(self, orders: tuple = (1, 2, 4, 6, 8), memory_revs: float = 30.0,
                  prior_sd_nm: float = 0.03, floor_sd_nm: float = 1.0, min_counts: int = 2,
                  update_ticks: int = 10, adapt: bool = False):
         super().__init__(orders=orders, memory_revs=memory_revs, prior_sd_nm=prior_sd_nm,

@@ -1,0 +1,147 @@
+"""Sensitivity sweeps: the same benchmark with one (or a grid of) parameters varied.
+
+A swept parameter is a key of the scenario file (``joint.counts_per_rev``,
+``temperature_c``, ...) set to each given value in every scenario of the run. The swept
+scenarios are built exactly as a file with that value would be (every range check of
+:mod:`rippleb.scenario` applies), so a sweep can ask for nothing a scenario file could
+not. Each result row gets one column per swept parameter, named after it.
+
+Examples
+--------
+>>> from rippleb.sweep import parse_params, grid
+>>> params = parse_params(["joint.counts_per_rev=500,2500", "temperature_c=25,40"])
+>>> [p.name for p in params]
+['joint.counts_per_rev', 'temperature_c']
+>>> len(grid(params))
+4
+"""
+
+from __future__ import annotations
+
+import copy
+import itertools
+import tomllib
+from dataclasses import dataclass
+
+from rippleb.errors import InputError
+from rippleb.registry import unknown_name
+
+
+@dataclass(frozen=True)
+class Param:
+    """A parameter that can be swept: where it lives, its type, its valid range and why.
+
+    Attributes
+    ----------
+    name
+        The dotted key in a scenario file, also the result column.
+    kind
+        ``int`` or ``float``.
+    low, high
+        Valid range, inclusive.
+    doc
+        What it changes, one line (``rippleb sweep --help`` lists it).
+    """
+
+    name: str
+    kind: type
+    low: float
+    high: float
+    doc: str
+
+    def parse(self, text: str):
+        """One value from the command line, range-checked; raises one clear line."""
+        try:
+            value = self.kind(text) if self.kind is float else int(text, 10)
+        except ValueError:
+            raise InputError(f"--param {self.name}: {text!r} is not {'an integer' if self.kind is int else 'a number'}") from None
+        if not self.low <= value <= self.high:
+            raise InputError(f"--param {self.name}: {value:g} is outside the valid range "
+                             f"[{self.low:g}, {self.high:g}]")
+        return value
+
+
+#: Every sweepable parameter (docs/sweeps.md lists them with the reasons for their ranges).
+PARAMS = {p.name: p for p in (
+    Param("joint.counts_per_rev", int, 64, 2**20,
+          "encoder positions per motor revolution (paper: 2500)"),
+    Param("joint.fs", float, 2_000.0, 100_000.0,
+          "DAQ sample rate of strain and current [Hz] (default 20 kHz)"),
+    Param("joint.control_rate", float, 100.0, 10_000.0,
+          "control tick rate [Hz] (default 1 kHz); must not exceed joint.fs"),
+    Param("joint.gear_ratio", float, 30.0, 160.0,
+          "harmonic-drive reduction (size-25 catalogue ratios 30-160; default 100)"),
+    Param("temperature_c", float, -10.0, 80.0,
+          "lubricant temperature of the scored session [degC] (default 40)"),
+)}
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """One parameter and the values it takes."""
+
+    param: Param
+    values: tuple
+
+    @property
+    def name(self) -> str:
+        return self.param.name
+
+
+def parse_params(specs: list[str]) -> list[Sweep]:
+    """``["name=v1,v2", ...]`` -> sweeps; unknown names and bad values are one clear line."""
+    if not specs:
+        raise InputError("--param: give at least one NAME=v1,v2,... "
+                         f"(sweepable: {', '.join(PARAMS)})")
+    sweeps, seen = [], set()
+    for spec in specs:
+        name, sep, values = spec.partition("=")
+        name = name.strip()
+        if not sep or not values.strip():
+            raise InputError(f"--param {spec!r}: expected NAME=v1,v2,...")
+        if name not in PARAMS:
+            raise InputError("--param: " + unknown_name("sweep parameter", name, list(PARAMS)))
+        if name in seen:
+            raise InputError(f"--param {name}: given twice; list all its values in one --param")
+        seen.add(name)
+        parsed = [PARAMS[name].parse(v.strip()) for v in values.split(",") if v.strip()]
+        if len(set(parsed)) != len(parsed):
+            raise InputError(f"--param {name}: a value is repeated")
+        sweeps.append(Sweep(PARAMS[name], tuple(parsed)))
+    return sweeps
+
+
+def grid(sweeps: list[Sweep]) -> list[dict]:
+    """Every combination of the swept values, as ``{name: value}`` dicts, in order."""
+    names = [s.name for s in sweeps]
+    return [dict(zip(names, combo)) for combo in itertools.product(*(s.values for s in sweeps))]
+
+
+def apply(raw: dict, point: dict) -> dict:
+    """A copy of the parsed scenario file ``raw`` with each ``dotted.key = value`` of ``point`` set."""
+    out = copy.deepcopy(raw)
+    for name, value in point.items():
+        table = out
+        *parents, leaf = name.split(".")
+        for key in parents:
+            table = table.setdefault(key, {})
+        table[leaf] = value
+    return out
+
+
+def swept_scenario(name_or_path, point: dict):
+    """The scenario ``name_or_path`` with ``point`` applied, checked like a file.
+
+    Its name stays the original one (the result rows say which values were swept); an
+    impossible combination (e.g. a control rate above the swept sample rate) is refused
+    with the file, key and the swept values named.
+    """
+    from rippleb.scenario import _Parser, _read_source
+
+    text, path, name = _read_source(name_or_path)
+    raw = apply(tomllib.loads(text), point)
+    where = ", ".join(f"{k}={v}" for k, v in point.items())
+    try:
+        return _Parser(path, name).scenario(raw)
+    except InputError as exc:
+        raise InputError(f"{exc} (with {where})") from None

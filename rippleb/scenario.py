@@ -42,8 +42,15 @@ _ROBOT_KEYS = {"name": (str,), "joint": (str,), "posture": (dict,)}
 _TRAJ_KEYS = {"start": _NUMBER, "segment": (list,)}
 _SEGMENT_KEYS = {"kind": (str,), "duration": _NUMBER, "to": _NUMBER, "by": _NUMBER,
                  "velocity": _NUMBER, "shape": (str,)}
-_LOAD_KEYS = {"torque": _NUMBER, "start": _NUMBER, "stop": _NUMBER, "rise": _NUMBER,
-              "known": (bool,)}
+_LOAD_KEYS = {"kind": (str,), "torque": _NUMBER, "amplitude": _NUMBER, "f0": _NUMBER,
+              "f1": _NUMBER, "start": _NUMBER, "stop": _NUMBER, "rise": _NUMBER, "known": (bool,)}
+LOAD_KINDS = ("step", "chirp")
+#: Keys each load kind needs and may have (``kind`` itself is optional, default ``step``).
+_LOAD_NEEDS = {"step": {"torque", "start"}, "chirp": {"amplitude", "f0", "f1", "start", "stop"}}
+_LOAD_OPTIONAL = {"step": {"stop", "rise", "known"}, "chirp": {"rise", "known"}}
+#: A chirp's top frequency may reach this fraction of ``fs`` (well below Nyquist, so the
+#: sampled sweep is a sweep and not its alias).
+CHIRP_MAX_F1_FS = 0.05
 _FAULT_KEYS = {"encoder_missed": _NUMBER, "encoder_spurious_rate": _NUMBER,
                "strain_full_scale": _NUMBER, "dropout_rate": _NUMBER, "dropout_length": _NUMBER,
                "bridge_drift": _NUMBER, "current_offset": _NUMBER}
@@ -150,8 +157,14 @@ class Load:
     """An external torque on the joint [Nm], switched on at ``start`` and off at ``stop``.
 
     It rises and falls smoothly over ``rise`` seconds (a contact is never a perfect step).
-    ``known`` loads (payloads, calibration weights) enter ``torque_ref``; unknown ones
-    (contact) only ``torque_true``.
+    ``known`` loads (payloads, calibration weights, a test rig's shaker) enter
+    ``torque_ref``; unknown ones (contact) only ``torque_true``.
+
+    ``kind = "step"`` holds ``torque`` between the edges. ``kind = "chirp"`` is a
+    logarithmic swept sine of ``amplitude`` [Nm] whose frequency rises from ``f0`` at
+    ``start`` to ``f1`` [Hz] at ``stop`` (and stays at ``f1`` while it fades over
+    ``rise``): ``f(t) = f0 (f1/f0)^((t - start)/(stop - start))``. A log sweep spends
+    equal time per octave, so every octave of 0.5-80 Hz is excited alike.
     """
 
     torque: float
@@ -159,12 +172,26 @@ class Load:
     stop: float = float("inf")
     rise: float = DEFAULT_RISE
     known: bool = False
+    kind: str = "step"
+    f0: float = 0.0
+    f1: float = 0.0
 
     def evaluate(self, t: np.ndarray) -> np.ndarray:
         """The torque at times ``t`` [Nm]."""
         on = _smooth(np.clip((t - self.start) / self.rise, 0.0, 1.0))
         off = _smooth(np.clip((t - self.stop) / self.rise, 0.0, 1.0)) if np.isfinite(self.stop) else 0.0
-        return self.torque * (on - off)
+        envelope = self.torque * (on - off)
+        if self.kind == "chirp":
+            return envelope * np.sin(self.chirp_phase(t))
+        return envelope
+
+    def chirp_phase(self, t: np.ndarray) -> np.ndarray:
+        """Phase [rad] of the swept sine: ``2 pi`` times the integral of ``f(t)`` from ``start``."""
+        span = self.stop - self.start
+        ratio = self.f1 / self.f0
+        s = np.clip((np.asarray(t, float) - self.start) / span, 0.0, None)
+        sweep = self.f0 * span * (ratio ** np.minimum(s, 1.0) - 1.0) / np.log(ratio)
+        return 2.0 * np.pi * (sweep + self.f1 * span * np.maximum(s - 1.0, 0.0))
 
 
 @dataclass(frozen=True)
@@ -275,6 +302,28 @@ class Scenario:
             raise InputError(f"{self.path}: trajectory: {self.joint} travels over [{lo:.3f}, {hi:.3f}] "
                              f"rad, outside its limits [{lo_lim:.3f}, {hi_lim:.3f}]")
         return self
+
+    def step_edges(self) -> np.ndarray:
+        """The edges of the step loads: rows ``(start, rise, change)`` [s, s, Nm], by time.
+
+        A step load has two edges, on at ``start`` (change ``+torque``) and off at
+        ``stop`` (change ``-torque``; none if never released).
+        """
+        edges = [(load.start, load.rise, load.torque) for load in self.loads if load.kind == "step"]
+        edges += [(load.stop, load.rise, -load.torque) for load in self.loads
+                  if load.kind == "step" and np.isfinite(load.stop)]
+        return np.array(sorted(edges), float).reshape(-1, 3)
+
+    def chirp_windows(self) -> np.ndarray:
+        """The time spans of the chirp loads: rows ``(start, stop + rise)`` [s], by time."""
+        spans = [(load.start, load.stop + load.rise) for load in self.loads if load.kind == "chirp"]
+        return np.array(sorted(spans), float).reshape(-1, 2)
+
+    def chirp_bands(self) -> np.ndarray:
+        """The frequency ranges of the chirp loads: rows ``(f0, f1)`` [Hz], in the order of
+        :meth:`chirp_windows`."""
+        bands = [(load.start, load.f0, load.f1) for load in self.loads if load.kind == "chirp"]
+        return np.array([b[1:] for b in sorted(bands)], float).reshape(-1, 2)
 
     def external_torque(self, t: np.ndarray, *, known_only: bool = False) -> np.ndarray:
         """Sum of the external torques at ``t`` [Nm] (only known ones if ``known_only``)."""
@@ -525,25 +574,47 @@ class _Parser:
 
     def load(self, raw, i: int, spec: JointSpec | None = None) -> Load:
         where = f"load[{i}]"
+        spec = spec or JointSpec()
         values = self.table(raw, _LOAD_KEYS, where)
-        for key in ("torque", "start"):
-            if key not in values:
-                self.fail(f"{where}.{key}", "missing")
-        load = Load(torque=float(values["torque"]), start=float(values["start"]),
+        kind = values.get("kind", "step")
+        if kind not in LOAD_KINDS:
+            self.fail(f"{where}.kind", f"must be one of {', '.join(LOAD_KINDS)}, got {kind!r}")
+        for key in values:
+            if key != "kind" and key not in _LOAD_NEEDS[kind] | _LOAD_OPTIONAL[kind]:
+                self.fail(f"{where}.{key}", f"not used by a {kind} load")
+        for key in sorted(_LOAD_NEEDS[kind] - set(values)):
+            self.fail(f"{where}.{key}", f"missing (a {kind} load needs "
+                      f"{', '.join(sorted(_LOAD_NEEDS[kind]))})")
+        size_key = "torque" if kind == "step" else "amplitude"
+        load = Load(torque=float(values[size_key]), start=float(values["start"]),
                     stop=float(values.get("stop", float("inf"))),
                     rise=float(values.get("rise", DEFAULT_RISE)),
-                    known=values.get("known", False))
+                    known=values.get("known", False), kind=kind,
+                    f0=float(values.get("f0", 0.0)), f1=float(values.get("f1", 0.0)))
         if load.rise <= 0:
             self.fail(f"{where}.rise", f"must be positive, got {load.rise}")
-        peak = MAX_LOAD_FACTOR * (spec or JointSpec()).rated_torque
+        peak = MAX_LOAD_FACTOR * spec.rated_torque
         if abs(load.torque) > peak:
-            self.fail(f"{where}.torque", f"|{load.torque:g}| Nm exceeds {MAX_LOAD_FACTOR:g} x rated_torque "
-                      f"({peak:g} Nm); the drive would break")
+            self.fail(f"{where}.{size_key}", f"|{load.torque:g}| Nm exceeds {MAX_LOAD_FACTOR:g} x "
+                      f"rated_torque ({peak:g} Nm); the drive would break")
         if load.start < 0:
             self.fail(f"{where}.start", f"must be >= 0, got {load.start}")
         if load.stop < load.start + load.rise:
             self.fail(f"{where}.stop", f"must be at least start + rise ({load.start + load.rise})")
+        if kind == "chirp":
+            self.chirp_band(load, where, spec)
         return load
+
+    def chirp_band(self, load: Load, where: str, spec: JointSpec) -> None:
+        """Refuse a sweep that does not rise or that the DAQ cannot sample."""
+        top = CHIRP_MAX_F1_FS * spec.fs
+        if load.f0 <= 0:
+            self.fail(f"{where}.f0", f"must be positive, got {load.f0:g}")
+        if load.f1 <= load.f0:
+            self.fail(f"{where}.f1", f"must be above f0 ({load.f0:g} Hz), got {load.f1:g}")
+        if load.f1 > top:
+            self.fail(f"{where}.f1", f"must be at most {CHIRP_MAX_F1_FS:g} x fs ({top:g} Hz), "
+                      f"got {load.f1:g}")
 
     def evaluation(self, raw, duration: float) -> tuple[float, float]:
         values = self.table(raw, _EVAL_KEYS, "evaluation")

@@ -7,7 +7,7 @@ from rippleb import InputError, builtin_scenarios, load_scenario, scored_scenari
 from rippleb.scenario import scenario_from_dict
 
 EXPECTED = {"paper-quintic", "stop-restart", "reversal", "creep", "speed-sweep",
-            "load-steps", "static-contact", "calibration"}
+            "load-steps", "static-contact", "torque-chirp", "calibration"}
 
 
 def test_builtins_are_the_design_names_and_calibration_is_not_scored():

@@ -8,6 +8,7 @@ rest in the window). ``docs/metrics.md`` repeats these formulas.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -52,12 +53,17 @@ class Truth:
 
     @classmethod
     def from_simulation(cls, sim) -> "Truth":
-        """From a simulator ``Simulation`` (its ``log``, ``moving``, ``wave_angle``, ``eval_mask``)."""
-        log, sc = sim.log, sim.scenario
-        return cls(fs=log.spec.fs, eval_mask=np.asarray(sim.eval_mask, bool),
-                   moving=np.asarray(sim.moving, bool), wave_angle=np.asarray(sim.wave_angle, float),
-                   torque_true=log.torque_true, torque_ref=log.torque_ref,
-                   steps=sc.step_edges(), chirps=np.hstack([sc.chirp_windows(), sc.chirp_bands()]))
+        """From a simulator ``Simulation`` (its ``log``, ``moving``, ``wave_angle``, ``eval_mask``,
+        and the step edges and chirps of its ``scenario``)."""
+        log = sim.log
+        truth = cls(fs=log.spec.fs, eval_mask=np.asarray(sim.eval_mask, bool),
+                    moving=np.asarray(sim.moving, bool), wave_angle=np.asarray(sim.wave_angle, float),
+                    torque_true=log.torque_true, torque_ref=log.torque_ref)
+        sc = getattr(sim, "scenario", None)   # a stand-in simulation may have none: no events
+        if sc is None:
+            return truth
+        return dataclasses.replace(truth, steps=sc.step_edges(),
+                                   chirps=np.hstack([sc.chirp_windows(), sc.chirp_bands()]))
 
     @classmethod
     def from_recording(cls, log) -> "Truth":

@@ -8,7 +8,8 @@ rest in the window). ``docs/metrics.md`` repeats these formulas.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import dataclasses
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -17,6 +18,15 @@ from rippleb.dsp import encoder_angle
 MAX_DELAY_S = 0.100
 RESTART_ANGLE_RAD = 4.0 * np.pi   # two wave-generator revolutions
 REST_HOLD_S = 0.010               # recorded logs: no encoder count for 10 ms is "at rest"
+DELAY_PEAK_FACTOR = 2.0           # delay_ms: lags whose misfit 1 - r is within 2x the best ...
+DELAY_PEAK_WIDTH_S = 0.025        # ... must all lie within 25 ms of it, else the peak is not distinct
+STEP_MAX_RISE_S = 0.100           # step_latency_ms: a load edge rising within 100 ms is a step
+STEP_BASELINE_S = 0.010           # the estimate's level before a step: its mean over 10 ms
+STEP_HORIZON_S = 0.200            # a step not half-reached 200 ms after its 50 % time counts 200 ms
+BAND_FRACTION = 1.0 / 3.0         # bandwidth_hz: H1 averaged over 1/3-octave bands ...
+BAND_STEP = 1.0 / 12.0            # ... centred every 1/12 octave
+BAND_MIN_BINS = 4.0               # lowest centre: at least 4 FFT bins of the shortest chirp window
+HALF_POWER = 1.0 / np.sqrt(2.0)   # -3 dB
 
 
 @dataclass(frozen=True)
@@ -25,6 +35,11 @@ class Truth:
 
     ``torque_true`` and ``torque_ref`` may be None (a recorded log has no ``torque_true``).
     ``moving``, ``wave_angle`` [rad] and ``eval_mask`` are per sample; ``fs`` in Hz.
+    The scenario's known events (empty when it has none, or for a recording):
+    ``steps`` rows ``(start, rise, change)`` [s, s, Nm] of the step loads' edges,
+    ``chirps`` rows ``(start, stop, f0, f1)`` [s, s, Hz, Hz] of the chirp loads.
+    All fields but ``fs`` and the torques are arrays, so a case file stores them as such
+    (:data:`TRUTH_ARRAYS`).
     """
 
     fs: float
@@ -33,14 +48,22 @@ class Truth:
     wave_angle: np.ndarray
     torque_true: np.ndarray | None = None
     torque_ref: np.ndarray | None = None
+    steps: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    chirps: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
 
     @classmethod
     def from_simulation(cls, sim) -> "Truth":
-        """From a simulator ``Simulation`` (its ``log``, ``moving``, ``wave_angle``, ``eval_mask``)."""
+        """From a simulator ``Simulation`` (its ``log``, ``moving``, ``wave_angle``, ``eval_mask``,
+        and the step edges and chirps of its ``scenario``)."""
         log = sim.log
-        return cls(fs=log.spec.fs, eval_mask=np.asarray(sim.eval_mask, bool),
-                   moving=np.asarray(sim.moving, bool), wave_angle=np.asarray(sim.wave_angle, float),
-                   torque_true=log.torque_true, torque_ref=log.torque_ref)
+        truth = cls(fs=log.spec.fs, eval_mask=np.asarray(sim.eval_mask, bool),
+                    moving=np.asarray(sim.moving, bool), wave_angle=np.asarray(sim.wave_angle, float),
+                    torque_true=log.torque_true, torque_ref=log.torque_ref)
+        sc = getattr(sim, "scenario", None)   # a stand-in simulation may have none: no events
+        if sc is None:
+            return truth
+        return dataclasses.replace(truth, steps=sc.step_edges(),
+                                   chirps=np.hstack([sc.chirp_windows(), sc.chirp_bands()]))
 
     @classmethod
     def from_recording(cls, log) -> "Truth":
@@ -55,6 +78,10 @@ class Truth:
                    moving=moving_from_encoder(log.encoder, log.spec.fs),
                    wave_angle=encoder_angle(log.encoder, log.spec.counts_per_rev),
                    torque_true=log.torque_true, torque_ref=log.torque_ref)
+
+
+#: The array fields of :class:`Truth` besides the torques: what a case file must store.
+TRUTH_ARRAYS = ("moving", "wave_angle", "eval_mask", "steps", "chirps")
 
 
 def moving_from_encoder(encoder: np.ndarray, fs: float, hold_s: float = REST_HOLD_S) -> np.ndarray:
@@ -96,11 +123,32 @@ def delay_ms(estimate: np.ndarray, truth: np.ndarray | None, mask: np.ndarray, f
 
     i.e. the mean-removed cross-correlation normalised on the overlap, so that neither
     the shrinking overlap nor a trend in the signal favours a lag. Returns
-    ``1000 argmax_L r[L] / fs`` [ms] (the estimate lags the truth by ``L``); NaN if the
-    truth or the estimate is constant over the window.
+    ``1000 L* / fs`` [ms] with ``L* = argmax_L r[L]`` (the estimate lags the truth by
+    ``L*``).
+
+    NaN if the truth or the estimate is constant over the window, or if the peak is not
+    distinct: with the misfit ``m[L] = 1 - r[L]``, every lag with
+    ``m[L] <= 2 m[L*]`` must lie within 25 ms (a quarter of the searched range) of
+    ``L*``. Doubling the misfit means the shift has added as much error as the estimate
+    already has; on a torque that varies slowly against that error (ripple, noise) it
+    takes a shift of tens of milliseconds, and ``L*`` is set by the error, not by a delay.
     """
-    if truth is None or not mask.any():
+    r = _lag_correlation(estimate, truth, mask, fs, max_delay_s)
+    if r is None:
         return float("nan")
+    best = int(np.argmax(r))
+    misfit = 1.0 - r
+    close = np.flatnonzero(misfit <= DELAY_PEAK_FACTOR * max(misfit[best], 0.0) + 1e-12)
+    if np.max(np.abs(close - best)) > DELAY_PEAK_WIDTH_S * fs:
+        return float("nan")
+    return float(1000.0 * best / fs)
+
+
+def _lag_correlation(estimate, truth, mask, fs, max_delay_s) -> np.ndarray | None:
+    """``r[L]`` of :func:`delay_ms` for ``L = 0 .. max lag`` (``-inf`` where undefined);
+    None if it is undefined for every lag."""
+    if truth is None or not mask.any():
+        return None
     idx = np.flatnonzero(mask)
     x = np.asarray(truth[idx[0]: idx[-1] + 1], float)
     z = np.asarray(estimate[idx[0]: idx[-1] + 1], float)
@@ -109,7 +157,7 @@ def delay_ms(estimate: np.ndarray, truth: np.ndarray | None, mask: np.ndarray, f
     n = len(x)
     max_lag = min(int(round(max_delay_s * fs)), n - 2)
     if max_lag < 0 or not np.any(x) or not np.any(z):
-        return float("nan")
+        return None
     lags = np.arange(max_lag + 1)
     count = n - lags
     size = 1 << int(np.ceil(np.log2(2 * n)))
@@ -123,7 +171,112 @@ def delay_ms(estimate: np.ndarray, truth: np.ndarray | None, mask: np.ndarray, f
     var = np.maximum(sxx - sx * sx / count, 0.0) * np.maximum(szz - sz * sz / count, 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         r = np.where(var > 0, cov / np.sqrt(var), -np.inf)
-    return float(1000.0 * np.argmax(r) / fs)
+    return None if not np.isfinite(r).any() else r
+
+
+def step_latency_ms(estimate: np.ndarray, truth_info: Truth) -> float:
+    """Mean time [ms] from each known torque step to 50 % of it in the estimate.
+
+    The steps are the edges ``(start, rise, change)`` of the scenario's step loads
+    (``Truth.steps``) with ``rise <= 100 ms`` whose start lies in ``W``. The true load
+    passes half its change at ``t50 = start + rise / 2`` (the smooth edge is symmetric).
+    The estimate's level before the edge is its mean ``b`` over the 10 ms before
+    ``start``; it reaches 50 % at the first sample ``n >= start`` with
+    ``sign(change) (y[n] - b) >= |change| / 2``, searched until 200 ms after ``t50`` or
+    the next edge's start. The step's latency is ``n / fs - t50`` (negative if the
+    estimate leads), or 200 ms if it never gets there. NaN if there is no such step.
+    """
+    fs, mask, y = truth_info.fs, truth_info.eval_mask, np.asarray(estimate, float)
+    steps = np.asarray(truth_info.steps, float).reshape(-1, 3)
+    starts = np.round(steps[:, 0] * fs).astype(np.int64)
+    baseline = max(1, int(round(STEP_BASELINE_S * fs)))
+    latencies = []
+    for k, (start, rise, change) in enumerate(steps):
+        i0 = starts[k]
+        if rise > STEP_MAX_RISE_S or change == 0 or i0 < baseline or i0 >= len(y) or not mask[i0]:
+            continue
+        t50 = start + 0.5 * rise
+        end = min(int(round((t50 + STEP_HORIZON_S) * fs)) + 1, len(y),
+                  *[s for s in starts[k + 1:] if s > i0])
+        level = np.mean(y[i0 - baseline: i0])
+        reached = np.flatnonzero(np.sign(change) * (y[i0:end] - level) >= 0.5 * abs(change))
+        latencies.append((i0 + reached[0]) / fs - t50 if len(reached) else STEP_HORIZON_S)
+    return 1000.0 * float(np.mean(latencies)) if latencies else float("nan")
+
+
+def bandwidth_hz(estimate: np.ndarray, truth: np.ndarray | None, truth_info: Truth) -> float:
+    """The highest frequency [Hz] up to which the estimate's gain over the truth stays
+    within -3 dB, measured on the scenario's chirp loads (``Truth.chirps``).
+
+    The H1 estimate of the transfer function truth -> estimate over the chirp windows
+    (each ``[start, stop]`` wholly in ``W``): in each window, truth ``x`` and estimate
+    ``y`` are detrended (least-squares line), multiplied by a Hann window and Fourier
+    transformed (``X``, ``Y``); in a band ``B`` of 1/3 octave around a centre ``f_c``,
+    summed over the windows and the FFT bins in ``B``::
+
+        H(f_c) = sum Y conj(X) / sum |X|^2
+
+    (averaging over frequency and windows like Welch's method averages over segments:
+    error uncorrelated with the truth, ripple and noise, averages out). The centres step
+    down by 1/12 octave from ``f_hi = f1`` to no lower than ``f_lo = max(2^(1/6) f0, 4 / T)``
+    (``T`` the shortest window: 4 FFT bins at least; the common range of the chirps). The result is
+    the first centre with ``|H| < 1/sqrt(2)``, interpolated linearly in log frequency on
+    the gain in dB against the centre before it; ``f_hi`` if the gain never drops that
+    low (the bandwidth is at least that), ``f_lo`` if it is low from the start (at most
+    that). NaN without a chirp in ``W`` or without a truth.
+    """
+    fs, mask = truth_info.fs, truth_info.eval_mask
+    chirps = np.asarray(truth_info.chirps, float).reshape(-1, 4)
+    spans = [(int(round(a * fs)), min(int(round(b * fs)) + 1, len(mask))) for a, b in chirps[:, :2]]
+    keep = [k for k, (i0, i1) in enumerate(spans) if i1 - i0 > 8 and mask[i0:i1].all()]
+    if truth is None or not keep:
+        return float("nan")
+    shortest = min(spans[k][1] - spans[k][0] for k in keep) / fs
+    f_lo = max(2.0 ** (BAND_FRACTION / 2) * chirps[keep, 2].max(), BAND_MIN_BINS / shortest)
+    f_hi = chirps[keep, 3].min()
+    if f_lo >= f_hi:
+        return float("nan")
+    centres = f_hi * 2.0 ** (-BAND_STEP * np.arange(int(np.log2(f_hi / f_lo) / BAND_STEP) + 1)[::-1])
+    edges = np.stack([centres * 2.0 ** (-BAND_FRACTION / 2), centres * 2.0 ** (BAND_FRACTION / 2)])
+    cross = np.zeros(len(centres), complex)
+    power = np.zeros(len(centres))
+    for k in keep:
+        i0, i1 = spans[k]
+        c, p = _band_spectra(np.asarray(estimate[i0:i1], float), np.asarray(truth[i0:i1], float),
+                             fs, edges)
+        cross += c
+        power += p
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gain = np.abs(cross) / power
+    return _first_crossing(centres, gain, HALF_POWER)
+
+
+def _band_spectra(y: np.ndarray, x: np.ndarray, fs: float, edges: np.ndarray):
+    """Band sums of ``Y conj(X)`` and ``|X|^2`` (detrended, Hann-windowed) over ``edges``."""
+    from scipy.signal import detrend
+
+    taper = np.hanning(len(x))
+    X = np.fft.rfft(detrend(x) * taper)
+    Y = np.fft.rfft(detrend(y) * taper)
+    freqs = np.fft.rfftfreq(len(x), 1.0 / fs)
+    lo, hi = np.searchsorted(freqs, edges[0], "left"), np.searchsorted(freqs, edges[1], "right")
+    cross = _cumsum0(Y * np.conj(X))
+    power = _cumsum0(np.abs(X) ** 2)
+    return cross[hi] - cross[lo], power[hi] - power[lo]
+
+
+def _first_crossing(centres: np.ndarray, gain: np.ndarray, level: float) -> float:
+    """The first frequency where ``gain`` falls below ``level`` (log-f / dB interpolation)."""
+    below = np.flatnonzero(~(gain >= level))   # NaN counts as below: no gain measured
+    if len(below) == 0:
+        return float(centres[-1])
+    k = int(below[0])
+    if k == 0:
+        return float(centres[0])
+    g0, g1 = 20 * np.log10(gain[k - 1]), 20 * np.log10(max(gain[k], 1e-300))
+    target = 20 * np.log10(level)
+    frac = (g0 - target) / (g0 - g1) if g0 != g1 else 0.0
+    return float(centres[k - 1] * (centres[k] / centres[k - 1]) ** frac)
 
 
 def _cumsum0(values: np.ndarray) -> np.ndarray:
@@ -172,8 +325,8 @@ def score(estimate: np.ndarray, truth: Truth) -> dict[str, float]:
     """All accuracy columns of one result row (the timing columns come from :func:`tick_stats`).
 
     ``delay_ms`` is against ``torque_true``, or against ``torque_ref`` when there is no
-    ``torque_true`` (recorded logs); likewise ``restart_max_error_nm`` and
-    ``stopped_rms_error_nm``.
+    ``torque_true`` (recorded logs); likewise ``bandwidth_hz``, ``restart_max_error_nm``
+    and ``stopped_rms_error_nm``.
     """
     mask = truth.eval_mask
     best = truth.torque_true if truth.torque_true is not None else truth.torque_ref
@@ -184,11 +337,14 @@ def score(estimate: np.ndarray, truth: Truth) -> dict[str, float]:
         "rms_error_ref_nm": rms_error(estimate, truth.torque_ref, mask),
         "max_error_ref_nm": max_error(estimate, truth.torque_ref, mask),
         "delay_ms": delay_ms(estimate, best, mask, truth.fs),
+        "bandwidth_hz": bandwidth_hz(estimate, best, truth),
+        "step_latency_ms": step_latency_ms(estimate, truth),
         "restart_max_error_nm": restart_max_error(estimate, best, truth),
         "stopped_rms_error_nm": rms_error(estimate, best, rest),
     }
 
 
 METRIC_COLUMNS = ("rms_error_nm", "max_error_nm", "rms_error_ref_nm", "max_error_ref_nm",
-                  "delay_ms", "restart_max_error_nm", "stopped_rms_error_nm",
+                  "delay_ms", "bandwidth_hz", "step_latency_ms", "restart_max_error_nm",
+                  "stopped_rms_error_nm",
                   "us_per_tick_p50", "us_per_tick_p99", "samples_per_s")

@@ -16,6 +16,7 @@ and interpolated, so a scenario of any length costs a fixed number of ``rnea`` c
 from __future__ import annotations
 
 import functools
+import hashlib
 from dataclasses import dataclass
 from os.path import join
 
@@ -27,6 +28,13 @@ from rippleb.errors import InputError
 #: linear interpolation error of the gravity torque below 1e-4 Nm on the UR5
 #: (measured by ``tests/test_physics.py::test_load_table_matches_rnea``).
 TABLE_POINTS = 2049
+
+#: Relative spread (1 sigma) of the nominal model's link masses and rotational inertias
+#: against the true ones: what an identification or a CAD model leaves. **Estimate**, see
+#: docs/physics.md, "Nominal model of eq. (7)".
+NOMINAL_MASS_SPREAD = 0.03
+NOMINAL_INERTIA_SPREAD = 0.05
+_NOMINAL_SALT = int.from_bytes(hashlib.sha256(b"nominal-model").digest()[:8], "little")
 
 
 def robot_names() -> list[str]:
@@ -58,6 +66,27 @@ def load_model(robot: str):
     import pinocchio as pin
 
     return pin.buildModelFromUrdf(urdf_path(robot))
+
+
+def nominal_model(robot: str, seed: int):
+    """The model a robot's controller would use for the robot of ``seed``: the URDF's
+    links with every mass and rotational inertia (about the centre of mass) off by
+    independent normal relative errors of ``NOMINAL_MASS_SPREAD`` and
+    ``NOMINAL_INERTIA_SPREAD``. Centres of mass and kinematics stay exact.
+
+    The true robot is the URDF; the same seed always gives the same nominal model.
+    """
+    import pinocchio as pin
+
+    model = load_model(robot).copy()
+    rng = np.random.default_rng(np.random.SeedSequence([seed, _NOMINAL_SALT]))
+    for i in range(1, model.njoints):
+        link = model.inertias[i]
+        mass_scale = 1.0 + NOMINAL_MASS_SPREAD * rng.standard_normal()
+        inertia_scale = 1.0 + NOMINAL_INERTIA_SPREAD * rng.standard_normal()
+        model.inertias[i] = pin.Inertia(link.mass * mass_scale, link.lever.copy(),
+                                        link.inertia * inertia_scale)
+    return model
 
 
 def joint_names(robot: str) -> list[str]:
@@ -96,7 +125,7 @@ class LoadTable:
 
 
 def load_table(robot: str, joint: str, posture: dict[str, float],
-               q_range: tuple[float, float], points: int = TABLE_POINTS) -> LoadTable:
+               q_range: tuple[float, float], points: int = TABLE_POINTS, model=None) -> LoadTable:
     """Tabulate the load of ``joint`` over ``q_range`` with the others at ``posture``.
 
     Parameters
@@ -109,10 +138,13 @@ def load_table(robot: str, joint: str, posture: dict[str, float],
         Smallest and largest angle of the moving joint [rad]; the grid is padded a little.
     points
         Grid size.
+    model
+        The Pinocchio model to tabulate (default the true one of ``robot``; pass
+        :func:`nominal_model` for the controller's).
     """
     import pinocchio as pin
 
-    model = load_model(robot)
+    model = load_model(robot) if model is None else model
     data = model.createData()
     q0 = pin.neutral(model)
     for name, value in posture.items():

@@ -26,6 +26,7 @@ import numpy as np
 
 from rippleb.data import JointSpec
 from rippleb.errors import InputError
+from rippleb.profiles import DEFAULT_RISE, Load, Segment, evaluate_segments  # noqa: F401 (re-exported)
 
 CALIBRATION = "calibration"
 SEGMENT_KINDS = ("hold", "move", "ramp", "cruise")
@@ -42,8 +43,15 @@ _ROBOT_KEYS = {"name": (str,), "joint": (str,), "posture": (dict,)}
 _TRAJ_KEYS = {"start": _NUMBER, "segment": (list,)}
 _SEGMENT_KEYS = {"kind": (str,), "duration": _NUMBER, "to": _NUMBER, "by": _NUMBER,
                  "velocity": _NUMBER, "shape": (str,)}
-_LOAD_KEYS = {"torque": _NUMBER, "start": _NUMBER, "stop": _NUMBER, "rise": _NUMBER,
-              "known": (bool,)}
+_LOAD_KEYS = {"kind": (str,), "torque": _NUMBER, "amplitude": _NUMBER, "f0": _NUMBER,
+              "f1": _NUMBER, "start": _NUMBER, "stop": _NUMBER, "rise": _NUMBER, "known": (bool,)}
+LOAD_KINDS = ("step", "chirp")
+#: Keys each load kind needs and may have (``kind`` itself is optional, default ``step``).
+_LOAD_NEEDS = {"step": {"torque", "start"}, "chirp": {"amplitude", "f0", "f1", "start", "stop"}}
+_LOAD_OPTIONAL = {"step": {"stop", "rise", "known"}, "chirp": {"rise", "known"}}
+#: A chirp's top frequency may reach this fraction of ``fs`` (well below Nyquist, so the
+#: sampled sweep is a sweep and not its alias).
+CHIRP_MAX_F1_FS = 0.05
 _FAULT_KEYS = {"encoder_missed": _NUMBER, "encoder_spurious_rate": _NUMBER,
                "strain_full_scale": _NUMBER, "dropout_rate": _NUMBER, "dropout_length": _NUMBER,
                "bridge_drift": _NUMBER, "current_offset": _NUMBER}
@@ -64,107 +72,6 @@ MAX_LOAD_FACTOR = 10.0
 DEFAULT_ROBOT = "ur5"
 DEFAULT_JOINT = "shoulder_lift_joint"
 DEFAULT_TEMPERATURE_C = 40.0
-DEFAULT_RISE = 0.01
-
-
-@dataclass(frozen=True)
-class Segment:
-    """One piece of the joint trajectory, fully resolved.
-
-    ``kind`` is ``hold``, ``move`` (quintic rest-to-rest over ``distance``), ``ramp``
-    (velocity from ``v0`` to ``v1``, ``smooth`` quintic or ``linear`` shape) or
-    ``cruise`` (constant velocity ``v0``). ``t0`` [s], ``q0`` [rad] and ``v0`` [rad/s]
-    are the state at the segment's start.
-    """
-
-    kind: str
-    t0: float
-    duration: float
-    q0: float
-    v0: float
-    v1: float = 0.0
-    distance: float = 0.0
-    shape: str = "smooth"
-
-    @property
-    def t1(self) -> float:
-        """End time [s]."""
-        return self.t0 + self.duration
-
-    @property
-    def q1(self) -> float:
-        """End position [rad]."""
-        if self.kind == "move":
-            return self.q0 + self.distance
-        if self.kind == "ramp":
-            # Both shapes cover the mean of start and end velocity.
-            return self.q0 + 0.5 * (self.v0 + self.v1) * self.duration
-        return self.q0 + self.v0 * self.duration
-
-    @property
-    def end_velocity(self) -> float:
-        """Velocity at the end [rad/s]."""
-        return self.v1 if self.kind == "ramp" else (0.0 if self.kind in ("hold", "move") else self.v0)
-
-    def evaluate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Position, velocity and acceleration at times ``t`` inside the segment."""
-        tau = t - self.t0
-        zero = np.zeros_like(tau)
-        if self.kind == "hold":
-            return zero + self.q0, zero, zero
-        if self.kind == "cruise":
-            return self.q0 + self.v0 * tau, zero + self.v0, zero
-        T = self.duration
-        s = np.clip(tau / T, 0.0, 1.0)
-        if self.kind == "move":
-            d = self.distance
-            return (self.q0 + d * _smooth(s), d / T * _smooth_d1(s), d / T**2 * _smooth_d2(s))
-        dv = self.v1 - self.v0
-        if self.shape == "linear":
-            return (self.q0 + self.v0 * tau + 0.5 * dv * T * s * s,
-                    self.v0 + dv * s, zero + dv / T)
-        return (self.q0 + self.v0 * tau + dv * T * _smooth_integral(s),
-                self.v0 + dv * _smooth(s), dv / T * _smooth_d1(s))
-
-
-def _smooth(s):
-    """Quintic rest-to-rest shape 10 s^3 - 15 s^4 + 6 s^5 (zero slope and curvature at ends)."""
-    return s**3 * (10.0 - 15.0 * s + 6.0 * s * s)
-
-
-def _smooth_d1(s):
-    return 30.0 * s * s * (1.0 - s) ** 2
-
-
-def _smooth_d2(s):
-    return 60.0 * s * (1.0 - s) * (1.0 - 2.0 * s)
-
-
-def _smooth_integral(s):
-    """Integral of :func:`_smooth` from 0 to ``s``."""
-    return s**4 * (2.5 - 3.0 * s + s * s)
-
-
-@dataclass(frozen=True)
-class Load:
-    """An external torque on the joint [Nm], switched on at ``start`` and off at ``stop``.
-
-    It rises and falls smoothly over ``rise`` seconds (a contact is never a perfect step).
-    ``known`` loads (payloads, calibration weights) enter ``torque_ref``; unknown ones
-    (contact) only ``torque_true``.
-    """
-
-    torque: float
-    start: float
-    stop: float = float("inf")
-    rise: float = DEFAULT_RISE
-    known: bool = False
-
-    def evaluate(self, t: np.ndarray) -> np.ndarray:
-        """The torque at times ``t`` [Nm]."""
-        on = _smooth(np.clip((t - self.start) / self.rise, 0.0, 1.0))
-        off = _smooth(np.clip((t - self.stop) / self.rise, 0.0, 1.0)) if np.isfinite(self.stop) else 0.0
-        return self.torque * (on - off)
 
 
 @dataclass(frozen=True)
@@ -276,6 +183,28 @@ class Scenario:
                              f"rad, outside its limits [{lo_lim:.3f}, {hi_lim:.3f}]")
         return self
 
+    def step_edges(self) -> np.ndarray:
+        """The edges of the step loads: rows ``(start, rise, change)`` [s, s, Nm], by time.
+
+        A step load has two edges, on at ``start`` (change ``+torque``) and off at
+        ``stop`` (change ``-torque``; none if never released).
+        """
+        edges = [(load.start, load.rise, load.torque) for load in self.loads if load.kind == "step"]
+        edges += [(load.stop, load.rise, -load.torque) for load in self.loads
+                  if load.kind == "step" and np.isfinite(load.stop)]
+        return np.array(sorted(edges), float).reshape(-1, 3)
+
+    def chirp_windows(self) -> np.ndarray:
+        """The time spans of the chirp loads: rows ``(start, stop + rise)`` [s], by time."""
+        spans = [(load.start, load.stop + load.rise) for load in self.loads if load.kind == "chirp"]
+        return np.array(sorted(spans), float).reshape(-1, 2)
+
+    def chirp_bands(self) -> np.ndarray:
+        """The frequency ranges of the chirp loads: rows ``(f0, f1)`` [Hz], in the order of
+        :meth:`chirp_windows`."""
+        bands = [(load.start, load.f0, load.f1) for load in self.loads if load.kind == "chirp"]
+        return np.array([b[1:] for b in sorted(bands)], float).reshape(-1, 2)
+
     def external_torque(self, t: np.ndarray, *, known_only: bool = False) -> np.ndarray:
         """Sum of the external torques at ``t`` [Nm] (only known ones if ``known_only``)."""
         total = np.zeros_like(np.asarray(t, dtype=float))
@@ -283,22 +212,6 @@ class Scenario:
             if load.known or not known_only:
                 total = total + load.evaluate(t)
         return total
-
-
-def evaluate_segments(segments, t: np.ndarray):
-    """Evaluate a resolved segment list at times ``t``, vectorised per segment.
-
-    The parser ends every list with an open ``cruise`` at the final velocity, so times
-    after the last planned segment keep that velocity (a hold if it is zero).
-    """
-    q, qd, qdd = (np.empty_like(t) for _ in range(3))
-    starts = np.array([seg.t0 for seg in segments])
-    index = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(segments) - 1)
-    for i, seg in enumerate(segments):
-        sel = index == i
-        if sel.any():
-            q[sel], qd[sel], qdd[sel] = seg.evaluate(t[sel])
-    return q, qd, qdd
 
 
 # ----------------------------------------------------------------------------- loading
@@ -525,25 +438,47 @@ class _Parser:
 
     def load(self, raw, i: int, spec: JointSpec | None = None) -> Load:
         where = f"load[{i}]"
+        spec = spec or JointSpec()
         values = self.table(raw, _LOAD_KEYS, where)
-        for key in ("torque", "start"):
-            if key not in values:
-                self.fail(f"{where}.{key}", "missing")
-        load = Load(torque=float(values["torque"]), start=float(values["start"]),
+        kind = values.get("kind", "step")
+        if kind not in LOAD_KINDS:
+            self.fail(f"{where}.kind", f"must be one of {', '.join(LOAD_KINDS)}, got {kind!r}")
+        for key in values:
+            if key != "kind" and key not in _LOAD_NEEDS[kind] | _LOAD_OPTIONAL[kind]:
+                self.fail(f"{where}.{key}", f"not used by a {kind} load")
+        for key in sorted(_LOAD_NEEDS[kind] - set(values)):
+            self.fail(f"{where}.{key}", f"missing (a {kind} load needs "
+                      f"{', '.join(sorted(_LOAD_NEEDS[kind]))})")
+        size_key = "torque" if kind == "step" else "amplitude"
+        load = Load(torque=float(values[size_key]), start=float(values["start"]),
                     stop=float(values.get("stop", float("inf"))),
                     rise=float(values.get("rise", DEFAULT_RISE)),
-                    known=values.get("known", False))
+                    known=values.get("known", False), kind=kind,
+                    f0=float(values.get("f0", 0.0)), f1=float(values.get("f1", 0.0)))
         if load.rise <= 0:
             self.fail(f"{where}.rise", f"must be positive, got {load.rise}")
-        peak = MAX_LOAD_FACTOR * (spec or JointSpec()).rated_torque
+        peak = MAX_LOAD_FACTOR * spec.rated_torque
         if abs(load.torque) > peak:
-            self.fail(f"{where}.torque", f"|{load.torque:g}| Nm exceeds {MAX_LOAD_FACTOR:g} x rated_torque "
-                      f"({peak:g} Nm); the drive would break")
+            self.fail(f"{where}.{size_key}", f"|{load.torque:g}| Nm exceeds {MAX_LOAD_FACTOR:g} x "
+                      f"rated_torque ({peak:g} Nm); the drive would break")
         if load.start < 0:
             self.fail(f"{where}.start", f"must be >= 0, got {load.start}")
         if load.stop < load.start + load.rise:
             self.fail(f"{where}.stop", f"must be at least start + rise ({load.start + load.rise})")
+        if kind == "chirp":
+            self.chirp_band(load, where, spec)
         return load
+
+    def chirp_band(self, load: Load, where: str, spec: JointSpec) -> None:
+        """Refuse a sweep that does not rise or that the DAQ cannot sample."""
+        top = CHIRP_MAX_F1_FS * spec.fs
+        if load.f0 <= 0:
+            self.fail(f"{where}.f0", f"must be positive, got {load.f0:g}")
+        if load.f1 <= load.f0:
+            self.fail(f"{where}.f1", f"must be above f0 ({load.f0:g} Hz), got {load.f1:g}")
+        if load.f1 > top:
+            self.fail(f"{where}.f1", f"must be at most {CHIRP_MAX_F1_FS:g} x fs ({top:g} Hz), "
+                      f"got {load.f1:g}")
 
     def evaluation(self, raw, duration: float) -> tuple[float, float]:
         values = self.table(raw, _EVAL_KEYS, "evaluation")

@@ -283,7 +283,9 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     table = _load_table(sc, q)
     tau_true = (table.torque(q, qd, qdd) + device.output_bearing_friction(qd, sc.temperature_c)
                 + sc.external_torque(t))
-    tau_ref = table.model_torque(q, qdd) + sc.external_torque(t, known_only=True)
+    # eq. (7) as a controller computes it: desired trajectory, nominal (identified) model
+    nominal = _load_table(sc, q, nominal_seed=seed)
+    tau_ref = nominal.model_torque(q, qdd) + sc.external_torque(t, known_only=True)
 
     N = spec.gear_ratio
     deflection = twist(tau_true)
@@ -319,7 +321,9 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
                       scenario=sc, device=device)
 
 
-def _load_table(sc: Scenario, q: np.ndarray):
+def _load_table(sc: Scenario, q: np.ndarray, nominal_seed: int | None = None):
+    """The true load table of the scenario's joint, or with ``nominal_seed`` the one of
+    the nominal model (:func:`rippleb.robot.nominal_model`) of that robot."""
     from rippleb import robot
 
     model = robot.load_model(sc.robot)
@@ -329,7 +333,8 @@ def _load_table(sc: Scenario, q: np.ndarray):
         raise InputError(f"{sc.path}: trajectory: {sc.joint} travels over [{lo:.3f}, {hi:.3f}] rad, "
                          f"outside its limits [{model.lowerPositionLimit[idx]:.3f}, "
                          f"{model.upperPositionLimit[idx]:.3f}]")
-    return robot.load_table(sc.robot, sc.joint, dict(sc.posture), (lo, hi))
+    model = None if nominal_seed is None else robot.nominal_model(sc.robot, nominal_seed)
+    return robot.load_table(sc.robot, sc.joint, dict(sc.posture), (lo, hi), model=model)
 
 
 def _strain(device: Device, sc: Scenario, t, theta_m, tau, noise) -> np.ndarray:

@@ -4,8 +4,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from rippleb.metrics import (Truth, delay_ms, max_error, moving_from_encoder, restart_max_error, rms_error,
-                             score, tick_stats)
+from rippleb.metrics import (Truth, bandwidth_hz, delay_ms, max_error, moving_from_encoder, restart_max_error,
+                             rms_error, score, step_latency_ms, tick_stats)
 
 FS = 20_000.0
 
@@ -29,10 +29,12 @@ def test_pure_delay_gives_its_delay(lag):
     assert delay_ms(y, x, np.ones(len(x), bool), FS) == pytest.approx(1000 * lag / FS)
 
 
-def test_delay_beyond_100_ms_is_clipped_to_the_range():
+def test_delay_beyond_100_ms_is_not_reported_as_one_inside_the_range():
+    # 150 ms: the correlation still rises at the range's end, so no lag in it fits
+    # distinctly better than its neighbours 25 ms away
     x = _truth(12_000)
     y = np.concatenate([np.full(3000, x[0]), x[:-3000]])
-    assert 0 <= delay_ms(y, x, np.ones(len(x), bool), FS) <= 100
+    assert np.isnan(delay_ms(y, x, np.ones(len(x), bool), FS))
 
 
 def test_all_zero_estimate_gives_the_rms_of_the_truth():
@@ -130,3 +132,105 @@ def test_delay_ignores_gain_and_offset(lag, seed, gain, offset):
     x = _truth(8000, seed)
     y = gain * np.concatenate([np.full(lag, x[0]), x[: len(x) - lag]]) + offset
     assert delay_ms(y, x, np.ones(len(x), bool), FS) == pytest.approx(1000 * lag / FS)
+
+
+# --------------------------------------------------------------- bandwidth and step latency
+
+CHIRP_FS = 2000.0
+
+
+def _chirp_case(seconds=6.0):
+    """A truth of two 8 Nm log sweeps 0.5-80 Hz on a slow drift, and its Truth."""
+    from rippleb.scenario import Load
+
+    t = np.arange(int(seconds * CHIRP_FS)) / CHIRP_FS
+    loads = [Load(torque=8.0, start=0.2, stop=2.9, kind="chirp", f0=0.5, f1=80.0),
+             Load(torque=8.0, start=3.1, stop=5.8, kind="chirp", f0=0.5, f1=80.0)]
+    truth = 3.0 * np.sin(2 * np.pi * 0.1 * t) + sum(load.evaluate(t) for load in loads)
+    chirps = np.array([[ld.start, ld.stop + ld.rise, ld.f0, ld.f1] for ld in loads])
+    info = Truth(fs=CHIRP_FS, eval_mask=np.ones(len(t), bool), moving=np.ones(len(t), bool),
+                 wave_angle=np.zeros(len(t)), torque_true=truth, chirps=chirps)
+    return truth, info
+
+
+def test_bandwidth_of_an_exact_estimate_is_the_top_of_the_sweep():
+    truth, info = _chirp_case()
+    assert bandwidth_hz(truth.copy(), truth, info) == pytest.approx(80.0)
+    assert score(truth.copy(), info)["bandwidth_hz"] == pytest.approx(80.0)
+
+
+@settings(max_examples=12, deadline=None)
+@given(st.floats(3.0, 60.0), st.integers(1, 4))
+def test_bandwidth_of_a_butterworth_is_its_cutoff(cutoff, order):
+    from scipy.signal import butter, sosfilt
+
+    truth, info = _chirp_case()
+    estimate = sosfilt(butter(order, cutoff, fs=CHIRP_FS, output="sos"), truth)
+    assert bandwidth_hz(estimate, truth, info) == pytest.approx(cutoff, rel=0.06)
+
+
+def test_bandwidth_ignores_offset_and_uncorrelated_ripple():
+    from scipy.signal import butter, sosfilt
+
+    truth, info = _chirp_case()
+    t = np.arange(len(truth)) / CHIRP_FS
+    ripple = 0.6 * np.cos(2 * np.pi * 19.0 * t) + 0.1 * np.random.default_rng(1).normal(size=len(t))
+    estimate = sosfilt(butter(2, 30.0, fs=CHIRP_FS, output="sos"), truth) + 5.0 + ripple
+    assert bandwidth_hz(estimate, truth, info) == pytest.approx(30.0, rel=0.06)
+
+
+def test_bandwidth_bounds_and_nan():
+    truth, info = _chirp_case()
+    # half the gain everywhere: below -3 dB from the lowest analysed band on
+    low = bandwidth_hz(0.5 * truth, truth, info)
+    assert 1.0 < low < 2.0
+    # no chirp, or one outside the window: undefined
+    assert np.isnan(score(truth, _info(len(truth), true=truth))["bandwidth_hz"])
+    outside = Truth(**{**info.__dict__, "eval_mask": np.arange(len(truth)) > 1000})
+    assert bandwidth_hz(truth, truth, outside) == pytest.approx(80.0)   # the second sweep remains
+    assert np.isnan(bandwidth_hz(truth, None, info))
+
+
+def _step_case(delay_s=0.0, lost=()):
+    """Steps of +10 (at 0.2 s) and -10 Nm (at 0.6 s) with 10 ms rise; estimate delayed."""
+    from rippleb.scenario import Load
+
+    t = np.arange(int(1.0 * FS)) / FS
+    load = Load(torque=10.0, start=0.2, stop=0.6, rise=0.01)
+    truth = load.evaluate(t) + 2.0
+    estimate = load.evaluate(t - delay_s) + 2.0
+    for k in lost:
+        estimate[int(FS * k):] = estimate[int(FS * k) - 1]
+    steps = np.array([[0.2, 0.01, 10.0], [0.6, 0.01, -10.0]])
+    info = Truth(fs=FS, eval_mask=np.ones(len(t), bool), moving=np.zeros(len(t), bool),
+                 wave_angle=np.zeros(len(t)), torque_true=truth, steps=steps)
+    return estimate, info
+
+
+@pytest.mark.parametrize("delay_ms_", [0.0, 0.5, 7.5, 40.0])
+def test_step_latency_of_a_delayed_estimate_is_its_delay(delay_ms_):
+    estimate, info = _step_case(delay_ms_ / 1000)
+    assert step_latency_ms(estimate, info) == pytest.approx(delay_ms_, abs=1000 / FS)
+    assert score(estimate, info)["step_latency_ms"] == pytest.approx(delay_ms_, abs=1000 / FS)
+
+
+def test_a_missed_step_counts_the_horizon_and_no_step_is_nan():
+    estimate, info = _step_case(0.0, lost=[0.55])   # frozen before the second step
+    assert step_latency_ms(estimate, info) == pytest.approx((0.0 + 200.0) / 2, abs=0.1)
+    x = _truth()
+    assert np.isnan(score(x, _info(len(x), true=x))["step_latency_ms"])
+    slow = Truth(**{**info.__dict__, "steps": np.array([[0.2, 0.3, 10.0]])})   # a ramp, not a step
+    assert np.isnan(step_latency_ms(estimate, slow))
+
+
+def test_delay_is_nan_on_a_slow_torque_with_ripple():
+    # creep-like: a 0.05 Hz torque under 1.6 Hz ripple; every lag fits about as well
+    t = np.arange(int(4 * FS)) / FS
+    x = 20.0 * np.sin(2 * np.pi * 0.05 * t)
+    y = x + 0.6 * np.cos(2 * np.pi * 1.6 * t)
+    assert np.isnan(delay_ms(y, x, np.ones(len(t), bool), FS))
+    # the same torque with steps on it has a distinct peak
+    x2 = x + 10.0 * (np.floor(t * 2) % 2)
+    y2 = x2 + 0.6 * np.cos(2 * np.pi * 1.6 * t)
+    assert delay_ms(np.concatenate([np.full(100, y2[0]), y2[:-100]]), x2, np.ones(len(t), bool),
+                    FS) == pytest.approx(5.0, abs=0.1)

@@ -7,7 +7,7 @@ from rippleb import InputError, builtin_scenarios, load_scenario, scored_scenari
 from rippleb.scenario import scenario_from_dict
 
 EXPECTED = {"paper-quintic", "stop-restart", "reversal", "creep", "speed-sweep",
-            "load-steps", "static-contact", "calibration"}
+            "load-steps", "static-contact", "torque-chirp", "calibration"}
 
 
 def test_builtins_are_the_design_names_and_calibration_is_not_scored():
@@ -70,6 +70,7 @@ def _bad(tmp_path, text):
 
 
 GOOD = '[[trajectory.segment]]\nkind = "move"\nby = 0.1\nduration = 0.5\n'
+CHIRP = '[[load]]\nkind = "chirp"\namplitude = 8.0\nf0 = 0.5\nf1 = 80.0\nstart = 0.1\nstop = 0.4\n'
 
 
 @pytest.mark.parametrize("text, key, words", [
@@ -95,6 +96,14 @@ GOOD = '[[trajectory.segment]]\nkind = "move"\nby = 0.1\nduration = 0.5\n'
      "trajectory.segment[1].kind", "ramp to velocity = 0"),
     (GOOD + "[[load]]\ntorque = 1.0\n", "load[0].start", "missing"),
     (GOOD + "[evaluation]\nstart = 2.0\nstop = 1.0\n", "evaluation", "start < stop"),
+    (GOOD + CHIRP.replace("f1 = 80.0\n", ""), "load[0].f1", "missing"),
+    (GOOD + CHIRP.replace("f1 = 80.0", "f1 = 0.4"), "load[0].f1", "above f0"),
+    (GOOD + CHIRP.replace("f0 = 0.5", "f0 = 0.0"), "load[0].f0", "positive"),
+    (GOOD + CHIRP.replace("f1 = 80.0", "f1 = 2000.0"), "load[0].f1", "at most"),
+    (GOOD + CHIRP.replace("amplitude", "torque"), "load[0].torque", "not used by a chirp"),
+    (GOOD + CHIRP.replace("amplitude = 8.0", "amplitude = 900.0"), "load[0].amplitude", "break"),
+    (GOOD + CHIRP.replace('"chirp"', '"sine"'), "load[0].kind", "step, chirp"),
+    (GOOD + "[[load]]\ntorque = 1.0\nstart = 0.1\nf0 = 2.0\n", "load[0].f0", "not used by a step"),
 ])
 def test_bad_files_are_refused_with_file_and_key(tmp_path, text, key, words):
     message = _bad(tmp_path, text)
@@ -122,3 +131,38 @@ def test_scenario_from_dict_is_checked_too():
     with pytest.raises(InputError, match="<x>: trajectory.segment: needs"):
         scenario_from_dict({"trajectory": {"segment": []}}, name="x")
     assert scenario_from_dict(BASE).duration == pytest.approx(0.5)
+
+
+def test_chirp_sweeps_log_frequency_from_f0_to_f1_and_fades_out():
+    sc = load_scenario("torque-chirp")
+    chirp = sc.loads[0]
+    assert chirp.kind == "chirp" and chirp.known and (chirp.f0, chirp.f1) == (0.5, 80.0)
+    span = chirp.stop - chirp.start
+    for s in (0.1, 0.5, 0.9):
+        t = chirp.start + s * span
+        dt = 1e-6
+        freq = (chirp.chirp_phase(t + dt) - chirp.chirp_phase(t - dt)) / (2 * dt) / (2 * np.pi)
+        assert freq == pytest.approx(chirp.f0 * (chirp.f1 / chirp.f0) ** s, rel=1e-6)
+    t = np.linspace(chirp.start + chirp.rise, chirp.stop, 200_001)
+    assert np.max(np.abs(chirp.evaluate(t))) == pytest.approx(chirp.torque, rel=1e-3)
+    assert chirp.evaluate(np.array([chirp.start - 0.01, chirp.stop + chirp.rise + 0.01])).tolist() == [0, 0]
+
+
+def test_torque_chirp_excites_at_rest_and_in_motion_and_is_known():
+    sc = load_scenario("torque-chirp")
+    windows = sc.chirp_windows()
+    assert len(windows) == 2 and sc.scored
+    _, qd, _ = sc.trajectory(np.linspace(*windows[0], 1000))
+    assert not qd.any()                        # the first sweep runs at rest
+    _, qd, _ = sc.trajectory(np.linspace(*windows[1], 1000))
+    assert np.all(qd == pytest.approx(0.3))    # the second while cruising
+    t = np.linspace(0, sc.duration, 10_000)
+    assert np.array_equal(sc.external_torque(t), sc.external_torque(t, known_only=True))
+    assert sc.chirp_bands().tolist() == [[0.5, 80.0], [0.5, 80.0]]
+
+
+def test_step_edges_are_the_on_and_off_edges_of_step_loads():
+    edges = load_scenario("load-steps").step_edges()
+    assert edges[:, 0].tolist() == [0.8, 1.5, 1.7, 2.2, 2.8, 3.5]
+    assert edges[:, 2].tolist() == [15.0, -15.0, -10.0, 10.0, 12.0, -12.0]
+    assert load_scenario("torque-chirp").step_edges().shape == (0, 3)

@@ -81,9 +81,9 @@ def tick_regressors(encoder: np.ndarray, orders: np.ndarray, table: np.ndarray) 
 _INNOVATION = types.UniTuple(types.float64, 2)
 
 
-@compiled([_INNOVATION(F8, F8_2D, IN_F8_2D, IN_F8, IN_F8, types.float64, types.float64),
-           _INNOVATION(F8, F8_2D, types.none, IN_F8, IN_F8, types.float64, types.float64)])
-def kf_step(x, P, F, q, h, z, r):
+@compiled(_INNOVATION(F8, F8_2D, IN_F8_2D, types.boolean, IN_F8, IN_F8, types.float64,
+                      types.float64))
+def kf_step(x, P, F, predict, q, h, z, r):
     """One predict and scalar update of a Kalman filter, in place; returns the innovation terms.
 
     Same equations as ``filterpy.kalman.KalmanFilter.predict`` with ``Q = diag(q)``,
@@ -94,9 +94,9 @@ def kf_step(x, P, F, q, h, z, r):
     ----------
     x, P
         State ``(n,)`` and covariance ``(n, n)``, updated in place.
-    F
-        Transition ``(n, n)``, or ``None`` for the identity (a random walk), which
-        saves two matrix products per tick.
+    F, predict
+        Transition ``(n, n)``, applied only if ``predict`` (False: the identity, a random
+        walk, which saves two matrix products per tick).
     q
         Diagonal of the process noise ``(n,)``.
     h, z, r
@@ -107,7 +107,7 @@ def kf_step(x, P, F, q, h, z, r):
     innovation, innovation_variance
     """
     n = len(x)
-    if F is not None:            # x = F x, P = F P F'
+    if predict:                  # x = F x, P = F P F'
         fx, fp = np.zeros(n), np.zeros((n, n))
         for i in range(n):
             for k in range(n):
@@ -226,10 +226,7 @@ def filter_ticks(ticks, y, before, orders, table, c1, c2, F, torque_rate, q_tick
         turns = abs(ticks[j, -1] - before) * (1.0 / m)
         before = ticks[j, -1]
         q = q_tick + turns * q_turn
-        if torque_rate:
-            kf_step(x, P, F, q, h, y[j], r)
-        else:
-            kf_step(x, P, None, q, h, y[j], r)
+        kf_step(x, P, F, torque_rate, q, h, y[j], r)
         posterior[j, 0] = x[0]
         posterior[j, 1] = x[1] if torque_rate else 0.0
 

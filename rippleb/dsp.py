@@ -144,21 +144,3 @@ def biquad(b, a, x, state, out):
         out[k] = y
     state[0], state[1] = z0, z1
 
-
-@compiled(types.void(IN_F8_2D, IN_F8, F8_2D, F8))
-def cascade(sections, x, state, out):
-    """Second-order ``sections`` (rows ``b0 b1 b2 a0 a1 a2``, ``a0 == 1``) in series.
-
-    The recursion of ``scipy.signal.sosfilt(sections, x, zi=state)``, sample by sample
-    through every section; ``state`` (sections, 2) is updated in place. ``out`` may be
-    ``x``.
-    """
-    for k in range(len(x)):
-        u = x[k]
-        for j in range(sections.shape[0]):
-            s = sections[j]
-            y = s[0] * u + state[j, 0]
-            state[j, 0] = s[1] * u - s[4] * y + state[j, 1]
-            state[j, 1] = s[2] * u - s[5] * y
-            u = y
-        out[k] = u

@@ -108,7 +108,8 @@ def test_step_per_tick(benchmark, logs, name):
     benchmark.extra_info.update({k: round(float(v), 2) for k, v in info.items()})
     print(f"\n{name}: p50 {p50[0]:.1f} us ({info['p50_over_lfilter']:.2f}x lfilter, "
           f"{info['p50_over_raw']:.1f}x raw), p99 {p99[0]:.1f} us "
-          f"({info['p99_over_lfilter']:.2f}x lfilter); lfilter p50 {p50[1]:.1f} p99 {p99[1]:.1f} us, "
+          f"({info['p99_over_lfilter']:.2f}x lfilter); "
+          f"lfilter p50 {p50[1]:.1f} p99 {p99[1]:.1f} us, "
           f"raw p50 {p50[2]:.1f} us")
     assert times.shape[1] == REPEATS * sum(-(-len(log) // log.spec.block_size) for log in runs)
 

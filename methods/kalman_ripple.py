@@ -363,7 +363,8 @@ class KalmanRipple(Method):
         """One torque estimate [Nm] per sample: the latest tick's posterior, held."""
         first = len(self.pending_strain_)  # position of block[0] in the joined arrays
         strain = np.concatenate([self.pending_strain_, block.strain])
-        encoder = np.concatenate([self.pending_encoder_, block.encoder]).astype(np.int64, copy=False)
+        encoder = np.concatenate([self.pending_encoder_, block.encoder])
+        encoder = encoder.astype(np.int64, copy=False)
         D = self.tick_
         done = len(strain) // D
         out = np.empty(len(block))

@@ -56,7 +56,7 @@ def _tick_times_us(method, blocks, spec, repeats=3):
 
 def _sosfilt_us(method, block_size, repeats=2000):
     """Median time of one ``sosfilt`` call with ``zi`` on ``block_size`` samples [us]."""
-    sos = np.array([np.concatenate([b, a]) for b, a in method.sections_])
+    sos = method.sections_
     zi = sosfilt_zi(sos)
     x = np.random.default_rng(0).normal(size=block_size)
     times = []

@@ -38,10 +38,12 @@ from __future__ import annotations
 
 import numpy as np
 from scipy import signal
+from numba import types
 from scipy.optimize import lsq_linear
 
 from rippleb.data import JointSpec, SensorBlock, SensorLog
-from rippleb.dsp import biquad_ss, encoder_angle, lift, series_ss, steady_state
+from rippleb.dsp import (F8, IN_F8, IN_I8, biquad, biquad_ss, compiled, encoder_angle,
+                         steady_state)
 from rippleb.method import Method
 
 
@@ -62,20 +64,64 @@ def soft_sign(w: np.ndarray, width: float) -> np.ndarray:
     return np.clip(np.asarray(w, dtype=float) / width, -1.0, 1.0)
 
 
-def motion_filter(fs: float, velocity_cutoff: float, accel_cutoff: float):
-    """State space of the encoder motion estimator, input ``fs * diff(angle)`` [rad/s].
+@compiled(types.float64(types.float64, types.float64, types.float64, IN_F8))
+def joint_torque(current, w, acc, model):
+    """Joint torque [Nm] of one sample: the friction model of the module docstring, inverted.
 
-    Outputs (rows of C): the motor velocity [rad/s] and acceleration [rad/s^2]. Both
-    stages are second-order Butterworth low-passes (no overshoot to speak of, flat
-    pass band); the acceleration is the filtered difference of the filtered velocity.
+    ``current`` [A], motor velocity ``w`` [rad/s] and acceleration ``acc`` [rad/s^2];
+    ``model`` holds ``K_t, J_m, N, fs, F_c, F_s, w_s, b, c, g, mu, sign_width``.
     """
-    lp_v = biquad_ss(*signal.butter(2, velocity_cutoff, fs=fs))
-    diff = biquad_ss(np.array([fs, -fs, 0.0]), np.array([1.0, 0.0, 0.0]))
-    lp_a = biquad_ss(*signal.butter(2, accel_cutoff, fs=fs))
-    A, B, C_a, D_a = series_ss(lp_v, diff, lp_a)
-    C_v = np.zeros_like(C_a)
-    C_v[0, :2] = lp_v[2][0]
-    return A, B, np.vstack([C_v, C_a]), np.array([lp_v[3][0], D_a[0]])
+    k_t, j_m, ratio = model[0], model[1], model[2]
+    f_c, f_s, w_s, visc, offset, scale, mu, width = (model[4], model[5], model[6], model[7],
+                                                     model[8], model[9], model[10], model[11])
+    s = min(max(w / width, -1.0), 1.0)                       # soft_sign
+    friction = (f_c + (f_s - f_c) * np.exp(-(w / w_s) ** 2)) * s + visc * w
+    motor = k_t * current - j_m * acc - friction - offset
+    # the load-dependent friction adds to the motor torque when the motor drives the
+    # load (sgn tau = sgn w) and subtracts when the load back-drives the motor
+    return ratio * motor / (scale + mu * s * np.sign(motor))
+
+
+@compiled(types.void(IN_I8, IN_F8, types.int64, types.float64, IN_F8, IN_F8, IN_F8, IN_F8,
+                    IN_F8, F8, F8))
+def friction_torque(counts, current, last_count, rate_scale, velocity_b, velocity_a, accel_b,
+                    accel_a, model, state, out):
+    """Joint torque per sample: the motion estimator and the inverted friction model.
+
+    Per sample: the count increment times ``rate_scale`` (``2 pi fs / counts_per_rev``)
+    is the raw motor velocity; a biquad (``velocity_b, velocity_a``, transposed direct
+    form II) gives ``w``; its difference times ``fs`` through a second biquad (``accel_b,
+    accel_a``) gives ``a``; :func:`joint_torque` gives the torque.
+
+    Parameters
+    ----------
+    counts, current
+        The block's encoder counts and motor current [A].
+    last_count
+        The count of the sample before the block.
+    model
+        ``K_t, J_m, N, fs, ...``, as :func:`joint_torque` takes it.
+    state
+        ``(5,)``: the two velocity-filter states, the previous velocity, the two
+        acceleration-filter states; updated in place.
+    out
+        The torque [Nm] per sample.
+    """
+    fs = model[3]
+    v0, v1, w_prev, a0, a1 = state[0], state[1], state[2], state[3], state[4]
+    for k in range(len(counts)):
+        rate = (counts[k] - last_count) * rate_scale
+        last_count = counts[k]
+        w = velocity_b[0] * rate + v0
+        v0 = velocity_b[1] * rate - velocity_a[1] * w + v1
+        v1 = velocity_b[2] * rate - velocity_a[2] * w
+        diff = fs * (w - w_prev)
+        w_prev = w
+        acc = accel_b[0] * diff + a0
+        a0 = accel_b[1] * diff - accel_a[1] * acc + a1
+        a1 = accel_b[2] * diff - accel_a[2] * acc
+        out[k] = joint_torque(current[k], w, acc, model)
+    state[0], state[1], state[2], state[3], state[4] = v0, v1, w_prev, a0, a1
 
 
 def identify_friction(w, load, residual, speeds, sign_width, load_dependent=True):
@@ -191,62 +237,36 @@ class CurrentBased(Method):
 
     # -- streaming -------------------------------------------------------------------
     def reset(self, spec: JointSpec) -> None:
-        """Build the estimator and output filters for ``spec`` and clear their state."""
+        """Design the estimator and output filters for ``spec`` and clear their state."""
         super().reset(spec)
         if not hasattr(self, "friction_"):
             self.friction_ = dict(coulomb=0.0, static=0.0, speed=1.0, viscous=0.0, offset=0.0,
                                   scale=1.0, load=0.0)
-        self.motion_ = motion_filter(spec.fs, self.velocity_cutoff, self.accel_cutoff)
-        self.output_ = biquad_ss(*signal.butter(2, self.cutoff, fs=spec.fs))
-        self.lifted_ = {}
-        self._lifted(spec.block_size)    # the runner's block length, built before the first tick
-        self.x_motion_ = np.zeros(self.motion_[0].shape[0])
+        f = self.friction_
+        self.model_ = np.array([spec.torque_constant, spec.rotor_inertia, spec.gear_ratio, spec.fs,
+                                f["coulomb"], f["static"], f["speed"], f["viscous"], f["offset"],
+                                f["scale"], f["load"], self.sign_width], dtype=float)
+        self.velocity_ = signal.butter(2, self.velocity_cutoff, fs=spec.fs)
+        self.accel_ = signal.butter(2, self.accel_cutoff, fs=spec.fs)
+        self.output_ = signal.butter(2, self.cutoff, fs=spec.fs)
+        self.rate_scale_ = 2.0 * np.pi / spec.counts_per_rev * spec.fs
+        self.x_motion_ = np.zeros(5)
         self.x_out_ = None               # output low-pass state, set on the first sample
         self.last_count_ = None
 
     def step(self, block: SensorBlock) -> np.ndarray:
         """Friction-compensated current torque of ``block``, low-passed."""
-        counts = block.encoder
-        m = len(counts)
-        if m == 0:
+        counts = np.asarray(block.encoder, dtype=np.int64)
+        if len(counts) == 0:
             return np.zeros(0)
         if self.last_count_ is None:
             self.last_count_ = int(counts[0])
-        motion, out = self._lifted(m)
-        n = len(self.x_motion_)
-        z = np.empty(n + m)              # [state, count increments]; counts -> rad/s is in the matrix
-        z[:n] = self.x_motion_
-        z[n] = counts[0] - self.last_count_
-        np.subtract(counts[1:], counts[:-1], out=z[n + 1:])
+        tau = np.empty(len(counts))
+        friction_torque(counts, np.asarray(block.current, dtype=float), self.last_count_,
+                        self.rate_scale_, *self.velocity_, *self.accel_, self.model_,
+                        self.x_motion_, tau)
         self.last_count_ = int(counts[-1])
-        va = motion @ z
-        self.x_motion_ = va[2 * m:]
-        tau = self._torque(np.asarray(block.current, dtype=float), va[:m], va[m:2 * m])
         if self.x_out_ is None:
-            self.x_out_ = steady_state(self.output_[0], self.output_[1], tau[0])
-        y = out @ np.concatenate([self.x_out_, tau])
-        self.x_out_ = y[m:]
-        return y[:m]
-
-    def _torque(self, current: np.ndarray, w: np.ndarray, a: np.ndarray) -> np.ndarray:
-        """Joint torque per sample from current, velocity and acceleration."""
-        spec, f = self.spec_, self.friction_
-        s = w * (1.0 / self.sign_width)
-        np.clip(s, -1.0, 1.0, out=s)          # soft_sign, in place
-        motor = (spec.torque_constant * current - spec.rotor_inertia * a
-                 - stribeck(w, f["coulomb"], f["static"], f["speed"], f["viscous"], sign=s)
-                 - f["offset"])
-        # the load-dependent friction adds to the motor torque when the motor drives the
-        # load (sgn tau = sgn w) and subtracts when the load back-drives the motor
-        return spec.gear_ratio * motor / (f["scale"] + f["load"] * s * np.sign(motor))
-
-    def _lifted(self, m: int):
-        """``[[O, T], [Am, R]]`` of the motion estimator (input in encoder counts per
-        sample) and of the output low-pass, each one matrix: one product per tick."""
-        if m not in self.lifted_:
-            O, T, Am, R = lift(*self.motion_, m)
-            scale = 2.0 * np.pi / self.spec_.counts_per_rev * self.spec_.fs
-            motion = np.block([[O, T * scale], [Am, R * scale]])
-            O, T, Am, R = lift(*self.output_, m)
-            self.lifted_[m] = (motion, np.block([[O, T], [Am, R]]))
-        return self.lifted_[m]
+            self.x_out_ = steady_state(*biquad_ss(*self.output_)[:2], tau[0])
+        biquad(*self.output_, tau, self.x_out_, tau)
+        return tau

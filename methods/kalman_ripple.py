@@ -42,9 +42,14 @@ with the torque rate when the state has one.
 from __future__ import annotations
 
 import numpy as np
+from numba import types
 
 from rippleb.data import JointSpec, SensorBlock, SensorLog
+from rippleb.dsp import F8, F8_2D, IN_F8, IN_F8_2D, IN_I8, compiled
 from rippleb.method import Method
+
+IN_I8_2D = types.Array(types.int64, 2, "A", readonly=True)
+IN_C16 = types.Array(types.complex128, 1, "A", readonly=True)
 
 LOG_2PI = float(np.log(2.0 * np.pi))
 
@@ -105,7 +110,12 @@ def tick_regressors(encoder: np.ndarray, orders: np.ndarray, table: np.ndarray) 
     return out
 
 
-def kf_step(x, P, F, q, h, z, r):
+_INNOVATION = types.UniTuple(types.float64, 2)
+
+
+@compiled(_INNOVATION(F8, F8_2D, IN_F8_2D, types.boolean, IN_F8, IN_F8, types.float64,
+                      types.float64))
+def kf_step(x, P, F, predict, q, h, z, r):
     """One predict and scalar update of a Kalman filter, in place; returns the innovation terms.
 
     Same equations as ``filterpy.kalman.KalmanFilter.predict`` with ``Q = diag(q)``,
@@ -116,9 +126,9 @@ def kf_step(x, P, F, q, h, z, r):
     ----------
     x, P
         State ``(n,)`` and covariance ``(n, n)``, updated in place.
-    F
-        Transition ``(n, n)``, or ``None`` for the identity (a random walk), which
-        saves two matrix products per tick.
+    F, predict
+        Transition ``(n, n)``, applied only if ``predict`` (False: the identity, a random
+        walk, which saves two matrix products per tick).
     q
         Diagonal of the process noise ``(n,)``.
     h, z, r
@@ -128,16 +138,36 @@ def kf_step(x, P, F, q, h, z, r):
     -------
     innovation, innovation_variance
     """
-    if F is not None:
-        x[:] = F @ x
-        P[:] = F @ P @ F.T
-    P.flat[::len(x) + 1] += q
-    ph = P @ h
-    s = h @ ph + r
-    e = z - h @ x
-    k = ph / s
-    x += k * e
-    P -= np.multiply.outer(k, ph)
+    n = len(x)
+    if predict:                  # x = F x, P = F P F'
+        fx, fp = np.zeros(n), np.zeros((n, n))
+        for i in range(n):
+            for k in range(n):
+                fx[i] += F[i, k] * x[k]
+                for j in range(n):
+                    fp[i, j] += F[i, k] * P[k, j]
+        x[:] = fx
+        for i in range(n):
+            for j in range(n):
+                P[i, j] = 0.0
+                for k in range(n):
+                    P[i, j] += fp[i, k] * F[j, k]
+    for i in range(n):
+        P[i, i] += q[i]
+    ph = np.zeros(n)
+    for i in range(n):
+        for j in range(n):
+            ph[i] += P[i, j] * h[j]
+    s = r
+    e = z
+    for i in range(n):
+        s += h[i] * ph[i]
+        e -= h[i] * x[i]
+    for i in range(n):
+        k = ph[i] / s
+        x[i] += k * e
+        for j in range(n):
+            P[i, j] -= k * ph[j]
     return e, s
 
 
@@ -183,6 +213,54 @@ def kf_run_batch(x, P, F, q, q_turn, turns, H, z, r):
         P -= k[:, :, None] * ph[:, None, :]
         loglik -= 0.5 * (LOG_2PI + np.log(s) + e * e / s)
     return loglik
+
+
+@compiled(types.void(IN_I8_2D, IN_F8, types.int64, IN_I8, IN_C16, IN_F8, IN_F8,
+                     IN_F8_2D, types.boolean, IN_F8, IN_F8, types.float64, F8, F8_2D, F8_2D))
+def filter_ticks(ticks, y, before, orders, table, c1, c2, F, torque_rate, q_tick, q_turn, r,
+                 x, P, posterior):
+    """Run the filter over whole ticks: regressors, measurement row, predict and update.
+
+    Per tick ``j``: the tick means of ``[cos(k theta), sin(k theta)]``
+    (:func:`tick_regressors`), the measurement row ``[1 + c1 . phi + sgn(prior) c2 . phi,
+    (0), phi]`` with the ``|tau|`` term linearised at the sign of the predicted torque, the
+    process noise ``q_tick + turns q_turn`` for the wave-generator revolutions turned since
+    the count ``before``, then :func:`kf_step` on the tick's mean strain ``y[j]`` [Nm].
+
+    Parameters
+    ----------
+    ticks
+        Encoder counts, ``(ticks, samples_per_tick)``.
+    F
+        Transition; applied only with ``torque_rate`` (otherwise the identity).
+    x, P
+        State and covariance, updated in place.
+    posterior
+        ``(ticks, 2)``: the posterior torque and torque rate (0 without ``torque_rate``).
+    """
+    n_torque = 2 if torque_rate else 1
+    m = len(table)
+    h = np.zeros(len(x))
+    for j in range(ticks.shape[0]):
+        lin, load = 1.0, 0.0
+        for i in range(len(orders)):
+            total = 0j
+            for k in range(ticks.shape[1]):
+                total += table[(ticks[j, k] * orders[i]) % m]
+            mean = total * (1.0 / ticks.shape[1])
+            h[n_torque + 2 * i], h[n_torque + 2 * i + 1] = mean.real, mean.imag
+        for i in range(n_torque, len(x)):
+            lin += c1[i - n_torque] * h[i]
+            load += c2[i - n_torque] * h[i]
+        # linearise the |tau| term of the map at the sign of the predicted torque
+        prior = x[0] + F[0, 1] * x[1] if torque_rate else x[0]
+        h[0] = lin + (load if prior > 0 else -load if prior < 0 else 0.0)
+        turns = abs(ticks[j, -1] - before) * (1.0 / m)
+        before = ticks[j, -1]
+        q = q_tick + turns * q_turn
+        kf_step(x, P, F, torque_rate, q, h, y[j], r)
+        posterior[j, 0] = x[0]
+        posterior[j, 1] = x[1] if torque_rate else 0.0
 
 
 class KalmanRipple(Method):
@@ -307,12 +385,11 @@ class KalmanRipple(Method):
         self._setup(spec)
         self.q_tick_ = np.diag(self._q_torque_matrix(self.q_torque_)).copy()
         self.q_turn_ = np.diag(self._q_ripple_matrix(self.q_ripple_)).copy()
-        self.F_step_ = self.F_ if self.torque_rate else None
         self.x_, self.P_ = self._initial_state()
         self.pending_strain_ = np.empty(0)
         self.pending_encoder_ = np.empty(0, dtype=np.int64)
         self.last_count_ = None  # encoder count at the end of the previous tick
-        self.have_estimate_ = False
+        self.estimate_ = None  # posterior torque and torque rate of the latest tick
         self.since_tick_ = 0  # samples since the end of the last tick
         self.shift_ = 0       # log count minus calibration-frame count
         self.homed_ = False   # an index pulse has been seen in this run
@@ -324,28 +401,24 @@ class KalmanRipple(Method):
         counts = self.home(block)
         strain = np.concatenate([self.pending_strain_, block.strain])
         encoder = np.concatenate([self.pending_encoder_, counts])
+        encoder = encoder.astype(np.int64, copy=False)
         D = self.tick_
         done = len(strain) // D
         out = np.empty(len(block))
         cursor = 0
         if done:
             ticks = encoder[:done * D].reshape(done, D)
-            phi = tick_regressors(ticks, self.orders_, self.table_)
             y = self.gain_ / D * strain[:done * D].reshape(done, D).sum(axis=1) + self.offset_
             start = ticks[0, 0] if self.last_count_ is None else self.last_count_
-            turns = self._turns(ticks, start)
+            posterior = np.empty((done, 2))
+            filter_ticks(ticks, y, start, self.orders_, self.table_, self.c1_, self.c2_, self.F_,
+                         self.torque_rate, self.q_tick_, self.q_turn_, self.r_, self.x_, self.P_,
+                         posterior)
             self.last_count_ = ticks[-1, -1]
-            H = self._rows(phi, np.zeros(done))
-            load = phi @ self.c2_
-            q = self.q_tick_ + turns[:, None] * self.q_turn_
         for j in range(done):
             last = (j + 1) * D - 1 - first  # block index of the sample that ends tick j
             self._fill(out, block, counts, cursor, last)
-            # linearise the |tau| term of the map at the sign of the predicted torque
-            prior = self.x_[0] + self.F_[0, 1] * self.x_[1] if self.torque_rate else self.x_[0]
-            H[j, 0] += load[j] if prior > 0 else -load[j] if prior < 0 else 0.0
-            kf_step(self.x_, self.P_, self.F_step_, q[j], H[j], y[j], self.r_)
-            self.have_estimate_ = True
+            self.estimate_ = posterior[j]
             self.since_tick_ = 0
             cursor = last
         self._fill(out, block, counts, cursor, len(block))
@@ -405,7 +478,7 @@ class KalmanRipple(Method):
         """
         if stop <= start:
             return
-        if not self.have_estimate_:
+        if self.estimate_ is None:
             # before the first tick ends: strain in Nm minus the no-load ripple, per sample
             phase = self.table_[(counts[start:stop, None] * self.orders_) % len(self.table_)]
             ripple = phase.real @ self.c0_[0::2] + phase.imag @ self.c0_[1::2]
@@ -415,10 +488,10 @@ class KalmanRipple(Method):
             # the tick mean estimates the torque at the tick centre, (D - 1) / 2 samples
             # before the tick's last sample; extrapolate from there on absolute indices
             k = self.since_tick_ + np.arange(stop - start) + 0.5 * (self.tick_ - 1)
-            out[start:stop] = self.x_[0] + self.x_[1] * k / self.spec_.fs
+            out[start:stop] = self.estimate_[0] + self.estimate_[1] * k / self.spec_.fs
             self.since_tick_ += stop - start
             return
-        out[start:stop] = self.x_[0]
+        out[start:stop] = self.estimate_[0]
 
     # -------------------------------------------------------------- helpers
     def _setup(self, spec):

@@ -26,16 +26,14 @@ See ``docs/methods/order-tracking.md`` for every parameter and how it was chosen
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import iirnotch, lfilter
+from numba import types
+from scipy.signal import iirnotch
 
-from rippleb.dsp import biquad_ss, fit_gain_offset, lift, series_ss
+from rippleb.dsp import F8, IN_F8, IN_F8_2D, IN_I8, biquad_ss, compiled, fit_gain_offset, series_ss
 from rippleb.method import Method
 
 # Absolute sample index meaning "no crossing yet": far enough back to count as a stop.
 _NEVER = -(1 << 62)
-# Order samples up to which one tick is filtered by two small matrix products (lifted
-# state space) instead of one lfilter call per section; longer runs use lfilter.
-_LIFT = 128
 
 
 def design_notches(orders, q: float, counts_per_rev: int) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -53,25 +51,11 @@ def design_notches(orders, q: float, counts_per_rev: int) -> list[tuple[np.ndarr
     return [iirnotch(order, q, fs=counts_per_rev) for order in orders]
 
 
-def cascade(sections, x: np.ndarray, zi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Run ``x`` through the second-order ``sections`` in series, carrying the state.
-
-    One ``lfilter`` call per section is the same transposed direct form II recursion as
-    ``sosfilt`` (so just as sound numerically) at about a sixth of its per-call cost.
-
-    Returns
-    -------
-    y, zf
-        The output and the final state, ``zf`` shaped like ``zi`` (sections, 2).
-    """
-    zf = np.empty_like(zi)
-    for k, (b, a) in enumerate(sections):
-        x, zf[k] = lfilter(b, a, x, zi=zi[k])
-    return x, zf
-
-
 def crossings(encoder: np.ndarray, strain: np.ndarray, prev_encoder: int, prev_strain: float):
     """Encoder position crossings between consecutive DAQ samples, with the strain there.
+
+    The definition the streaming loop (:func:`track`) follows crossing by crossing, as
+    a whole-array function for analysing logs.
 
     Between sample ``i - 1`` and sample ``i`` the count changes by ``m``; the ``m``
     crossed position boundaries are placed at the fractions ``(j + 1/2) / m``,
@@ -115,6 +99,116 @@ def _crossings(e, s, de):
     # Forward from count c the boundaries c+1, c+2, ...; backward c, c-1, ...
     label = np.repeat(e[moved], m) + np.where(direction > 0, j + 1, -j)
     return sample, label, direction, value
+
+
+@compiled(types.float64(IN_F8_2D, F8, types.float64))
+def notch(sections, state, x):
+    """One order sample through the second-order ``sections`` in series; the output.
+
+    Transposed direct form II, ``state`` (2 per section) updated in place in
+    ``lfilter``'s ``zi`` convention.
+    """
+    for j in range(sections.shape[0]):
+        b0, b1, b2, a1, a2 = (sections[j, 0], sections[j, 1], sections[j, 2], sections[j, 4],
+                              sections[j, 5])
+        y = b0 * x + state[2 * j]
+        state[2 * j] = b1 * x - a1 * y + state[2 * j + 1]
+        state[2 * j + 1] = b2 * x - a2 * y
+        x = y
+    return x
+
+
+@compiled(types.void(IN_F8_2D, IN_F8, IN_F8, types.float64, types.int64, types.int64, F8))
+def periodic_state(periodic, unit_state, table, x_new, label, direction, state):
+    """Into ``state``: the filter having seen the saved revolution infinitely often.
+
+    ``periodic.T @ history`` with ``history`` the table rotated to lead up to ``label``
+    in ``direction`` (:meth:`OrderTracking.history`), indexed in place instead of built,
+    plus the steady state of the level change ``x_new - table[label]``.
+    """
+    n = len(table)
+    here = label % n
+    level = x_new - table[here]
+    for r in range(len(state)):
+        state[r] = unit_state[r] * level
+    position = here
+    for c in range(n):
+        value = table[position]
+        for r in range(len(state)):
+            state[r] += periodic[c, r] * value
+        position += direction
+        if position == n:
+            position = 0
+        elif position < 0:
+            position = n - 1
+
+
+@compiled(types.void(IN_I8, IN_F8, IN_F8_2D, IN_F8, IN_F8_2D, types.int64, types.boolean,
+                     types.boolean, F8, F8, types.boolean[:], types.int64[:], F8, F8))
+def track(encoder, strain, sections, unit_state, periodic, stop_samples, dead_zone,
+          back_propagation, state, table, seen, counters, levels, out):
+    """The ripple-free strain per sample of one block: re-sample, notch, hold, switch.
+
+    Sample by sample: each encoder boundary crossed since the previous sample (placed as
+    in :func:`crossings`) gives one order sample, the strain interpolated there; a
+    crossing more than ``stop_samples`` after the previous one is a restart and first
+    rebuilds the filter ``state`` (:func:`periodic_state` once ``table`` holds a whole
+    revolution and ``back_propagation`` is on, else the steady state); the order sample
+    goes through the notches and what they removed is kept in ``table``. The output is
+    the latest filtered value, or with ``dead_zone`` after ``stop_samples`` without a
+    crossing the raw strain plus the offset ``filtered - raw`` of the last crossing;
+    before the first crossing, the raw strain.
+
+    Parameters
+    ----------
+    counters
+        ``previous count, absolute index of the block's first sample, absolute index of
+        the last crossing sample, positions seen``; updated in place.
+    levels
+        ``previous strain, filtered strain and filtered - raw at the last crossing``;
+        updated in place.
+    state, table, seen
+        Notch state, ripple removed at each position, positions seen; updated in place.
+    out
+        The filtered strain [V] per sample.
+    """
+    n = len(table)
+    prev_count, start, last_cross, n_seen = counters[0], counters[1], counters[2], counters[3]
+    prev_strain, y_last, offset_last = levels[0], levels[1], levels[2]
+    for i in range(len(encoder)):
+        count, value = encoder[i], strain[i]
+        step = count - prev_count
+        if step != 0:
+            m, direction = abs(step), (1 if step > 0 else -1)
+            restart = start + i - last_cross > stop_samples
+            for j in range(m):
+                # forward from count c the boundaries c+1, c+2, ...; backward c, c-1, ...
+                label = prev_count + (j + 1 if direction > 0 else -j)
+                x = prev_strain + (j + 0.5) / m * (value - prev_strain)
+                if j == 0 and restart:
+                    if back_propagation and n_seen == n:
+                        periodic_state(periodic, unit_state, table, x, label, direction, state)
+                    else:
+                        for r in range(len(state)):
+                            state[r] = unit_state[r] * x
+                y = notch(sections, state, x)
+                here = label % n
+                table[here] = x - y
+                if not seen[here]:
+                    seen[here] = True
+                    n_seen += 1
+            last_cross = start + i
+            y_last, offset_last = y, y - x
+        if last_cross == _NEVER:
+            out[i] = value
+        elif dead_zone and start + i - last_cross >= stop_samples:
+            out[i] = value + offset_last
+        else:
+            out[i] = y_last
+        prev_count, prev_strain = count, value
+    counters[0], counters[1], counters[2], counters[3] = prev_count, start + len(encoder), \
+        last_cross, n_seen
+    levels[0], levels[1], levels[2] = prev_strain, y_last, offset_last
 
 
 class OrderTracking(Method):
@@ -166,19 +260,23 @@ class OrderTracking(Method):
         """Design the notches for ``spec`` and clear the streaming state."""
         super().reset(spec)
         n = int(spec.counts_per_rev)
-        self.sections_ = design_notches(self.orders, self.q, n)
+        self.sections_ = np.array([np.concatenate([b, a]) for b, a in
+                                   design_notches(self.orders, self.q, n)])
         self.stop_samples_ = max(1, int(round(self.stop_after_s * spec.fs)))
         self._design_state_space(n)
         self.zi_ = np.zeros(2 * len(self.sections_))
         self.table_ = np.zeros(n)            # ripple removed at each position (one revolution)
         self.seen_ = np.zeros(n, dtype=bool)
-        self.full_ = False                   # every position of the revolution seen
-        self.prev_encoder_ = None
-        self.prev_strain_ = 0.0
-        self.samples_ = 0                    # absolute index of the next sample
-        self.last_cross_ = _NEVER            # absolute index of the last crossing sample
-        self.y_last_ = 0.0                   # filtered strain at the last crossing
-        self.offset_last_ = 0.0              # filtered - raw at the last crossing
+        self.started_ = False
+        # previous count, absolute index of the next sample, of the last crossing, positions seen
+        self.counters_ = np.array([0, 0, _NEVER, 0], dtype=np.int64)
+        # previous strain, filtered strain and filtered - raw at the last crossing
+        self.levels_ = np.zeros(3)
+
+    @property
+    def full_(self) -> bool:
+        """Every position of the revolution seen: back propagation has a whole revolution."""
+        return bool(self.counters_[3] == len(self.table_))
 
     def step(self, block):
         """Torque estimate [Nm] per sample: gain times the filtered strain plus offset.
@@ -193,118 +291,22 @@ class OrderTracking(Method):
     def filter_strain(self, block) -> np.ndarray:
         """The ripple-free strain [V] per sample of ``block`` (before gain and offset)."""
         strain = np.asarray(block.strain, dtype=float)
-        n = len(strain)
-        if n == 0:
-            return np.empty(0)
-        if self.prev_encoder_ is None:
-            self.prev_encoder_, self.prev_strain_ = int(block.encoder[0]), float(strain[0])
-        e = np.empty(n + 1, dtype=np.int64)
-        e[0] = self.prev_encoder_
-        e[1:] = block.encoder
-        de = e[1:] - e[:-1]
-        moved = np.flatnonzero(de)
-        out = self._track(strain, e, de, moved) if len(moved) else self._hold(strain)
-        self.prev_encoder_, self.prev_strain_ = int(e[-1]), float(strain[-1])
-        self.samples_ += n
+        out = np.empty(len(strain))
+        if len(strain) == 0:
+            return out
+        encoder = np.asarray(block.encoder, dtype=np.int64)
+        if not self.started_:          # the first sample: no crossing before it
+            self.counters_[0], self.levels_[0] = encoder[0], strain[0]
+            self.started_ = True
+        track(encoder, strain, self.sections_, self.unit_state_, self.periodic_,
+              self.stop_samples_, self.dead_zone, self.back_propagation, self.zi_, self.table_,
+              self.seen_, self.counters_, self.levels_, out)
         return out
-
-    def _hold(self, strain):
-        """A block without crossings: hold the last filtered value, or the dead-zone output."""
-        n = len(strain)
-        out = np.empty(n)
-        stop = 0 if self.last_cross_ == _NEVER else (
-            self.last_cross_ + self.stop_samples_ - self.samples_ if self.dead_zone else n)
-        stop = min(max(stop, 0), n)
-        out[:stop] = self.y_last_
-        out[stop:] = strain[stop:] + self.offset_last_
-        return out
-
-    def _track(self, strain, e, de, moved):
-        """A block with crossings: re-sample, filter, hold, switch."""
-        s = np.empty(len(strain) + 1)
-        s[0] = self.prev_strain_
-        s[1:] = strain
-        steps = de[moved]
-        moving = np.cumsum(de != 0)              # moving samples up to each sample
-        # A restart is a crossing after more than stop_samples samples without one.
-        restarts = np.flatnonzero(moved[1:] - moved[:-1] > self.stop_samples_) + 1
-        if self.samples_ + moved[0] - self.last_cross_ > self.stop_samples_:
-            restarts = np.concatenate(([0], restarts))
-        if steps.max() <= 1 and steps.min() >= -1:
-            # One crossing per moving sample (below fs counts/s): the same formulas as
-            # crossings() with m = 1, without its bookkeeping.
-            direction, crossed = steps, moving
-            label = e[moved] + (steps > 0)
-            x = s[moved] + 0.5 * (s[moved + 1] - s[moved])
-        else:
-            _, label, direction, x = _crossings(e, s, de)
-            m = np.abs(steps)
-            restarts = (np.cumsum(m) - m)[restarts]       # first crossing of each sample
-            crossed = np.cumsum(np.abs(de))
-        y = self._filter(x, label, direction, restarts)
-        out = self._output(strain, moved, moving, crossed, x, y)
-        self.last_cross_ = self.samples_ + int(moved[-1])
-        self.y_last_, self.offset_last_ = float(y[-1]), float(y[-1] - x[-1])
-        return out
-
-    def _output(self, strain, moved, moving, crossed, x, y):
-        """Latest filtered value per DAQ sample, or raw plus the stop offset in the dead zone.
-
-        ``moving`` and ``crossed`` count the moving samples and the crossings up to and
-        including each sample.
-        """
-        held = np.concatenate(([self.y_last_], y))[crossed]
-        first_ever = self.last_cross_ == _NEVER
-        if not self.dead_zone:
-            if first_ever:   # no filtered value yet: the raw strain is all there is
-                held[:moved[0]] = strain[:moved[0]]
-            return held
-        since = np.arange(len(strain)) - np.concatenate(
-            ([self.last_cross_ - self.samples_], moved))[moving]
-        offset = np.concatenate(([0.0 if first_ever else self.offset_last_], y - x))[crossed]
-        return np.where(since >= self.stop_samples_, strain + offset, held)
-
-    def _filter(self, x, label, direction, restarts):
-        """Notch the order samples ``x``, rebuilding the state at each restart index."""
-        if len(restarts) == 0:   # the usual tick: one run, no restart
-            y, self.zi_ = self._run(x, self.zi_)
-            self._remember(label, x - y, direction)
-            return y
-        y = np.empty_like(x)
-        start = 0
-        for r in list(restarts) + [len(x)]:
-            if r > start:
-                y[start:r], self.zi_ = self._run(x[start:r], self.zi_)
-                self._remember(label[start:r], x[start:r] - y[start:r], direction[start:r])
-            if r < len(x):
-                self.zi_ = self._restart_state(x[r], int(label[r]), int(direction[r]))
-            start = r
-        return y
-
-    def _run(self, x, state):
-        """Filter ``x`` from ``state``: one lifted matrix product for a tick, ``lfilter`` for
-        long runs."""
-        m = len(x)
-        if m <= _LIFT:
-            out = self.lifted_[m] @ np.concatenate((x, state))
-            return out[:m], out[m:]
-        y, zf = cascade(self.sections_, x, state.reshape(-1, 2))
-        return y, zf.ravel()
 
     def _design_state_space(self, n):
-        """State-space forms of the notch cascade: per tick (lifted), and over one revolution.
-
-        The state is the transposed-direct-form-II state of each section in turn, exactly
-        ``lfilter``'s ``zi``, so both paths share it.
-        """
-        A, B, C, D = series_ss(*(biquad_ss(b, a) for b, a in self.sections_))
-        O, T, _, R = lift(A, B, C, D, _LIFT)
-        # lifted_[m] maps [x (m samples), state] to [y (m samples), next state].
-        self.lifted_ = [None]
-        power = np.eye(len(B))
-        for m in range(1, _LIFT + 1):
-            power = A @ power
-            self.lifted_.append(np.block([[T[:m, :m], O[:m]], [R[:, _LIFT - m:], power]]))
+        """The steady state of the notch cascade, and its periodic steady state over one
+        revolution, in the cascade's state (``lfilter``'s ``zi`` of each section in turn)."""
+        A, B, _, _ = series_ss(*(biquad_ss(s[:3], s[3:]) for s in self.sections_))
         self.unit_state_ = np.linalg.solve(np.eye(len(B)) - A, B)   # steady state, input 1
         # Periodic steady state over one revolution: s = (I - A^n)^-1 sum_k A^(n-1-k) B h_k.
         reach = np.empty((len(B), n))
@@ -312,31 +314,11 @@ class OrderTracking(Method):
         for k in range(n - 1, -1, -1):
             reach[:, k] = column
             column = A @ column
-        self.periodic_ = np.linalg.solve(np.eye(len(B)) - np.linalg.matrix_power(A, n), reach)
-        self.periodic_reversed_ = np.ascontiguousarray(self.periodic_[:, ::-1])
+        # stored one row per history sample, so a restart reads it in memory order
+        self.periodic_ = np.ascontiguousarray(
+            np.linalg.solve(np.eye(len(B)) - np.linalg.matrix_power(A, n), reach).T)
 
     # -- back propagation ---------------------------------------------------------------
-
-    def _remember(self, label, ripple, direction):
-        """Keep the latest ripple estimate (what the notches removed) at each position."""
-        n = len(self.table_)
-        pos = label % n
-        # Without a reversal the labels run one by one, all distinct within a revolution.
-        if len(pos) > n or abs(int(label[-1]) - int(label[0])) != len(pos) - 1:
-            # A reversal revisits positions: keep the last visit (fancy assignment order
-            # with repeated indices is not guaranteed by numpy).
-            pos, last = np.unique(pos[::-1], return_index=True)
-            ripple = ripple[::-1][last]
-        self.table_[pos] = ripple
-        if not self.full_:
-            self.seen_[pos] = True
-            self.full_ = bool(self.seen_.all())
-
-    def _restart_state(self, x_new, label, direction):
-        """Filter state for the first order sample after a stop."""
-        if not (self.back_propagation and self.full_):
-            return self.unit_state_ * x_new
-        return self._periodic_state(x_new, label, direction)
 
     def history(self, x_new, label, direction) -> np.ndarray:
         """The saved revolution, ordered to lead up to the new crossing, at today's level.
@@ -352,21 +334,12 @@ class OrderTracking(Method):
         return ripple + (x_new - self.table_[label % n])
 
     def _periodic_state(self, x_new, label, direction):
-        """State after running the filter over :meth:`history` repeated for ever.
-
-        The ripple is periodic over one revolution, so this is the filter having seen the
-        saved revolution infinitely often, in closed form: ``periodic_ @ history``, with the
-        rotation of the table to the restart position done by splitting the product instead
-        of building the history.
-        """
-        n, t, L = len(self.table_), self.table_, label % len(self.table_)
-        if direction > 0:
-            g = self.periodic_
-            state = g[:, :n - L] @ t[L:] + g[:, n - L:] @ t[:L]
-        else:
-            g = self.periodic_reversed_
-            state = g[:, n - 1 - L:] @ t[:L + 1] + g[:, :n - 1 - L] @ t[L + 1:]
-        return state + self.unit_state_ * (x_new - t[L])
+        """State after running the filter over :meth:`history` repeated for ever
+        (:func:`periodic_state`)."""
+        state = np.empty(len(self.unit_state_))
+        periodic_state(self.periodic_, self.unit_state_, self.table_, float(x_new), int(label),
+                       int(direction), state)
+        return state
 
 
 class OrderTrackingNoDeadzone(OrderTracking):

@@ -31,6 +31,8 @@ Examples
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy import signal
 
@@ -81,16 +83,14 @@ def select_band(speed: float, current: int, centres: np.ndarray, hysteresis: flo
     ``|p - j| <= 0.5``; the current band is kept while ``|p - j| <= 0.5 + hysteresis``.
     ``OFF`` (pass-through) sits at ``p = -1``.
     """
-    if len(centres) > 1:
-        spacing = np.log(centres[1] / centres[0])
-    else:
-        spacing = np.log(2.0)
-    p = np.log(max(speed, 1e-12) / centres[0]) / spacing
+    # scalar math, not numpy: this runs once per control tick
+    spacing = math.log(centres[1] / centres[0]) if len(centres) > 1 else math.log(2.0)
+    p = math.log(max(speed, 1e-12) / centres[0]) / spacing
     if abs(p - current) <= 0.5 + hysteresis:
         return current
     if current == len(centres) - 1 and p > current:
         return current
-    return int(np.clip(np.round(p), OFF, len(centres) - 1))
+    return min(max(round(p), OFF), len(centres) - 1)
 
 
 class SwitchedNotch(Method):

@@ -18,15 +18,19 @@ import numpy as np
 from rippleb.data import SensorLog, make_log
 from rippleb.streaming import InvalidOutput, prepare_blocks, stream
 
-BLOCK_SIZES = (1, 7, 20, 1000)
-WINDOW_S = (0.6, 1.2)  # of stop-restart seed 0: the end of a move, a 50 ms stop, a restart
+#: Block lengths compared with one control tick: single samples, an odd length that cuts
+#: ticks, one tick, and one second (20 000 samples at 20 kHz), which holds the whole
+#: default log: a method must take a block of any length, as a recorded log may come.
+BLOCK_SIZES = (1, 7, 20, 1000, 20_000)
+#: Of stop-restart seed 0: the end of a move, a 50 ms stop, a restart and the move after, 1 s.
+WINDOW_S = (0.6, 1.6)
 
 
 def check_method(cls, *, log: SensorLog | None = None, calibration: SensorLog | None = None,
                  atol: float = 1e-6, block_sizes=BLOCK_SIZES, **params) -> None:
     """Assert that ``cls(**params)`` behaves as the runner expects.
 
-    Checks, on a short simulated log (by default 0.6 s of ``stop-restart`` around a stop
+    Checks, on a short simulated log (by default 1 s of ``stop-restart`` around a stop
     and restart, calibrated on the ``calibration`` scenario of the same device):
 
     1. output: one finite float per sample, for every block;
@@ -35,8 +39,9 @@ def check_method(cls, *, log: SensorLog | None = None, calibration: SensorLog | 
     3. causality: changing the samples from index ``k`` on (strain, current and encoder)
        leaves the estimate before ``k`` unchanged (``k`` on a tick boundary);
     4. block-size independence: blocks of each of ``block_sizes`` samples give the
-       estimate of blocks of ``spec.block_size`` samples, within ``atol`` [Nm]. A method
-       that decides once per tick on purpose may pass its own ``block_sizes``.
+       estimate of blocks of ``spec.block_size`` samples, within ``atol`` [Nm]; the
+       default sizes run from one sample to one second (the whole log in one block). A
+       method that decides once per tick on purpose may pass its own ``block_sizes``.
 
     Parameters
     ----------
@@ -71,7 +76,7 @@ def check_method(cls, *, log: SensorLog | None = None, calibration: SensorLog | 
 
 @functools.lru_cache(maxsize=1)
 def default_logs() -> tuple[SensorLog, SensorLog]:
-    """``(calibration, log)``: the calibration scenario and a 0.6 s slice of stop-restart, seed 0."""
+    """``(calibration, log)``: the calibration scenario and a 1 s slice of stop-restart, seed 0."""
     from rippleb.simulator import simulate
 
     calibration = simulate("calibration", 0).log

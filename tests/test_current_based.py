@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from rippleb import JointSpec, SensorLog
-from rippleb.methods.current_based import CurrentBased, identify_friction, soft_sign, stribeck
+from rippleb.methods.current_based import (CurrentBased, identify_friction, joint_torque,
+                                           soft_sign, stribeck)
 
 SPEC = JointSpec()
 # a made-up joint, not the simulator's: Nm on the motor shaft, rad/s
@@ -104,13 +105,14 @@ def test_estimate_follows_torque_when_the_model_holds():
 
 def test_load_dependent_friction_is_inverted_for_driving_and_back_driving():
     method = CurrentBased()
-    method.reset(SPEC)
     method.friction_ = dict(TRUE)
+    method.reset(SPEC)
     w = np.full(4, 30.0)
     tau = np.array([20.0, -20.0, 20.0, -20.0])
     w[2:] = -30.0
     current = _motor_current(w, np.zeros(4), tau)
-    np.testing.assert_allclose(method._torque(current, w, np.zeros(4)), tau, rtol=1e-12)
+    estimate = [joint_torque(i, v, 0.0, method.model_) for i, v in zip(current, w)]
+    np.testing.assert_allclose(estimate, tau, rtol=1e-12)
 
 
 @pytest.mark.parametrize("freq, gain", [(5.0, 1.0), (130.0, 2 ** -0.5), (1000.0, 0.017)])

@@ -175,7 +175,7 @@ def test_kf_step_is_the_kalman_equations():
     P0 = A @ A.T + np.eye(n)
     x0, h, q, F = rng.normal(size=n), rng.normal(size=n), rng.uniform(0.1, 1, n), rng.normal(size=(n, n))
     x, P = x0.copy(), P0.copy()
-    kf_step(x, P, F, q, h, 0.7, 0.2)
+    kf_step(x, P, F, True, q, h, 0.7, 0.2)
     Pp = F @ P0 @ F.T + np.diag(q)
     K = Pp @ h / (h @ Pp @ h + 0.2)
     np.testing.assert_allclose(x, F @ x0 + K * (0.7 - h @ F @ x0), atol=1e-12)

@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy.signal import detrend, sosfreqz
+from scipy.signal import detrend, lfilter, sosfreqz
 
 from rippleb import JointSpec, SensorBlock
 from rippleb.methods.order_tracking import (OrderTracking, OrderTrackingNoBackprop,
-                                            OrderTrackingNoDeadzone, cascade, crossings,
-                                            design_notches)
+                                            OrderTrackingNoDeadzone, crossings,
+                                            design_notches, notch)
 
 SEEDS = range(3)              # 5 seeds in docs/methods/order-tracking.md; 3 keep this fast
 VARIANTS = (OrderTracking, OrderTrackingNoDeadzone, OrderTrackingNoBackprop)
@@ -94,15 +94,23 @@ def test_notches_remove_orders_2_4_8_and_pass_the_rest():
     assert np.all(np.abs(gain_db[3:]) < 1.0)
 
 
-def test_lifted_filter_equals_lfilter_cascade():
+def cascade(sections, x, zi):
+    """The reference: one ``lfilter`` call per section in series, with state."""
+    zf = np.empty_like(zi)
+    for k, row in enumerate(sections):
+        x, zf[k] = lfilter(row[:3], row[3:], x, zi=zi[k])
+    return x, zf
+
+
+def test_notch_recursion_equals_lfilter_cascade():
     method = OrderTracking()
     method.reset(JointSpec())
     rng = np.random.default_rng(1)
     x, state = rng.normal(size=40), rng.normal(size=6)
-    y_lift, s_lift = method._run(x, state)
     y_ref, s_ref = cascade(method.sections_, x, state.reshape(-1, 2))
-    np.testing.assert_allclose(y_lift, y_ref, atol=1e-12)
-    np.testing.assert_allclose(s_lift, s_ref.ravel(), atol=1e-12)
+    y = [notch(method.sections_, state, v) for v in x]      # state updated in place
+    np.testing.assert_allclose(y, y_ref, atol=1e-12)
+    np.testing.assert_allclose(state, s_ref.ravel(), atol=1e-12)
 
 
 # -- dead zone and back propagation on a synthetic joint ------------------------------
@@ -177,7 +185,7 @@ def test_periodic_restart_state_equals_running_the_history_many_times(direction)
     method.reset(SPEC)
     rng = np.random.default_rng(2)
     method.table_[:] = rng.normal(size=N_SMALL)
-    method.full_ = True
+    method.seen_[:] = True
     label, x_new = 37, 1.5
     history = method.history(x_new, label, direction)
     state = np.zeros((3, 2))

@@ -25,12 +25,15 @@ import numpy as np
 
 from rippleb.cache import Artefact, load_log, log_bytes, pack, store
 from rippleb.data import SensorLog
+from rippleb import metrics
 from rippleb.metrics import Truth
 from rippleb.registry import one_line
 from rippleb.rows import FITTING, SCORED
 from rippleb.streaming import InvalidOutput, prepare_blocks, stream
 
-TRUTH_ARRAYS = ("moving", "wave_angle", "eval_mask", "torque_true", "torque_ref")
+#: Everything the metrics compare with: the per-sample arrays and events of
+#: :class:`~rippleb.metrics.Truth` (its own list) plus the two torque columns.
+TRUTH_ARRAYS = metrics.TRUTH_ARRAYS + ("torque_true", "torque_ref")
 
 
 def visible_log(log: SensorLog, role: str) -> SensorLog:

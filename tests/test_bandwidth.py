@@ -6,7 +6,9 @@ import pytest
 
 from rippleb.metrics import TRUTH_ARRAYS, Truth
 from rippleb.registry import Registry
-from rippleb.runner import evaluate, load_case, save_case
+from rippleb.cache import unpack
+from rippleb.jobs import truth_from_message, truth_message
+from rippleb.runner import evaluate
 from rippleb.simulator import simulate
 
 SEED = 900
@@ -51,11 +53,10 @@ def test_truth_carries_the_scenarios_events():
     assert truth.steps.shape == (6, 3) and truth.chirps.shape == (0, 4)
 
 
-@pytest.mark.xfail(strict=True, reason="the runner's case files store only moving, wave_angle and "
-                   "eval_mask until it stores every name in metrics.TRUTH_ARRAYS")
-def test_case_files_keep_the_truth_events(tmp_path):
+def test_the_runners_truth_message_keeps_the_events():
     sim = simulate("load-steps", SEED)
-    save_case(tmp_path / "case.npz", sim.log, Truth.from_simulation(sim))
-    _, truth = load_case(tmp_path / "case.npz")
+    expected = Truth.from_simulation(sim)
+    arrays, info = unpack(truth_message(expected, {}, sim.log.spec.block_size))
+    truth = truth_from_message(arrays, info)
     for name in TRUTH_ARRAYS:
-        assert np.array_equal(getattr(truth, name), getattr(Truth.from_simulation(sim), name))
+        assert np.array_equal(getattr(truth, name), getattr(expected, name))

@@ -3,7 +3,8 @@
 Notation: ``e[n] = y[n] - tau[n]`` is the estimate ``y`` minus the truth ``tau``
 (``torque_true`` or ``torque_ref``), ``W`` the samples of the evaluation window, ``|W|``
 their count. Each metric is NaN where it is undefined (no truth column, no restart, no
-rest in the window). ``docs/metrics.md`` repeats these formulas.
+rest in the window, no distinct correlation peak, no torque step or chirp in the
+scenario). ``docs/metrics.md`` repeats these formulas.
 """
 
 from __future__ import annotations

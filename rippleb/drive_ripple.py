@@ -85,20 +85,41 @@ def hysteresis(torque: np.ndarray, width: float) -> np.ndarray:
     ``p[n] = clip(p[n-1], tau[n] - width/2, tau[n] + width/2)``, ``p[0] = tau[0]``: the
     reading lags the torque by up to half the width, ``-width/2`` while the torque rises
     and ``+width/2`` while it falls, so a load cycle draws a loop ``width`` wide and the
-    sign follows the torque rate. The operator has memory, so it is a loop over the
-    samples (plain Python on a list: a few tens of ms per 100 000 samples).
+    sign follows the torque rate.
+
+    The operator has memory, but on a run where the torque does not fall it is
+    ``p = max(p_start, tau - width/2)`` (and on one where it does not rise
+    ``min(p_start, tau + width/2)``), so it is evaluated run by run: the true torque is
+    smooth and has few turning points.
     """
     tau = np.asarray(torque, float)
     if width <= 0 or len(tau) == 0:
         return np.zeros_like(tau)
     half = 0.5 * width
+    step = np.sign(np.diff(tau))
+    moving = np.flatnonzero(step)
+    # a run starts at each sample whose step direction differs from the last non-zero one
+    turns = moving[1:][step[moving[1:]] != step[moving[:-1]]] if len(moving) else moving
+    bounds = np.concatenate(([0], turns + 1, [len(tau)]))
     out = np.empty_like(tau)
     p = tau[0]
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        seg = tau[lo:hi]
+        direction = step[lo - 1] if lo else (step[moving[0]] if len(moving) else 1.0)
+        if direction > 0:
+            out[lo:hi] = np.maximum(p, np.maximum.accumulate(seg - half))
+        else:
+            out[lo:hi] = np.minimum(p, np.minimum.accumulate(seg + half))
+        p = out[hi - 1]
+    return out - tau
+
+
+def _hysteresis_reference(torque: np.ndarray, width: float) -> np.ndarray:
+    """The play operator sample by sample (the definition; for tests)."""
+    tau = np.asarray(torque, float)
+    half, out, p = 0.5 * width, np.empty_like(tau), tau[0] if len(tau) else 0.0
     for i, value in enumerate(tau.tolist()):
-        if p < value - half:
-            p = value - half
-        elif p > value + half:
-            p = value + half
+        p = min(max(p, value - half), value + half)
         out[i] = p
     return out - tau
 

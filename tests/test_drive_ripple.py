@@ -6,8 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rippleb import simulate
-from rippleb.drive_ripple import (HYSTERESIS_NM, OutputRipple, RippleSettings, bridge_ripple,
-                                  hysteresis)
+from rippleb.drive_ripple import (HYSTERESIS_NM, OutputRipple, RippleSettings, _hysteresis_reference,
+                                  bridge_ripple, hysteresis)
 from rippleb.scenario import scenario_from_dict
 
 LOAD_NM = 20.0
@@ -102,6 +102,14 @@ def test_hysteresis_is_bounded_and_follows_the_torque_rate(turns, width):
             assert h[i] == pytest.approx(-width / 2)
         if rate[i - 1] < 0 and back.max() - tau[i] >= width and np.all(np.diff(back[np.argmax(back):]) <= 0):
             assert h[i] == pytest.approx(width / 2)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(-30, 30), min_size=1, max_size=300), st.floats(0.01, 5.0), st.integers(1, 4))
+def test_run_by_run_hysteresis_is_the_play_operator(values, width, repeat):
+    # repeated values make plateaus, where the run's direction must carry over
+    tau = np.repeat(np.array(values), repeat)
+    assert np.allclose(hysteresis(tau, width), _hysteresis_reference(tau, width), atol=1e-12)
 
 
 def test_temperature_coefficient_scales_every_ripple_but_not_the_hysteresis():

@@ -3,7 +3,8 @@
 Notation: ``e[n] = y[n] - tau[n]`` is the estimate ``y`` minus the truth ``tau``
 (``torque_true`` or ``torque_ref``), ``W`` the samples of the evaluation window, ``|W|``
 their count. Each metric is NaN where it is undefined (no truth column, no restart, no
-rest in the window). ``docs/metrics.md`` repeats these formulas.
+rest in the window, no distinct correlation peak, no torque step or chirp in the
+scenario). ``docs/metrics.md`` repeats these formulas.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ DELAY_PEAK_WIDTH_S = 0.025        # ... must all lie within 25 ms of it, else th
 STEP_MAX_RISE_S = 0.100           # step_latency_ms: a load edge rising within 100 ms is a step
 STEP_BASELINE_S = 0.010           # the estimate's level before a step: its mean over 10 ms
 STEP_HORIZON_S = 0.200            # a step not half-reached 200 ms after its 50 % time counts 200 ms
-BAND_FRACTION = 1.0 / 3.0         # bandwidth_hz: H1 averaged over 1/3-octave bands ...
+BAND_FRACTION = 0.5               # bandwidth_hz: H1 averaged over half-octave bands ...
 BAND_STEP = 1.0 / 12.0            # ... centred every 1/12 octave
 BAND_MIN_BINS = 4.0               # lowest centre: at least 4 FFT bins of the shortest chirp window
 HALF_POWER = 1.0 / np.sqrt(2.0)   # -3 dB
@@ -211,14 +212,14 @@ def bandwidth_hz(estimate: np.ndarray, truth: np.ndarray | None, truth_info: Tru
     The H1 estimate of the transfer function truth -> estimate over the chirp windows
     (each ``[start, stop]`` wholly in ``W``): in each window, truth ``x`` and estimate
     ``y`` are detrended (least-squares line), multiplied by a Hann window and Fourier
-    transformed (``X``, ``Y``); in a band ``B`` of 1/3 octave around a centre ``f_c``,
+    transformed (``X``, ``Y``); in a band ``B`` of half an octave around a centre ``f_c``,
     summed over the windows and the FFT bins in ``B``::
 
         H(f_c) = sum Y conj(X) / sum |X|^2
 
     (averaging over frequency and windows like Welch's method averages over segments:
     error uncorrelated with the truth, ripple and noise, averages out). The centres step
-    down by 1/12 octave from ``f_hi = f1`` to no lower than ``f_lo = max(2^(1/6) f0, 4 / T)``
+    down by 1/12 octave from ``f_hi = f1`` to no lower than ``f_lo = max(2^(1/4) f0, 4 / T)``
     (``T`` the shortest window: 4 FFT bins at least; the common range of the chirps). The result is
     the first centre with ``|H| < 1/sqrt(2)``, interpolated linearly in log frequency on
     the gain in dB against the centre before it; ``f_hi`` if the gain never drops that

@@ -100,7 +100,8 @@ class Load:
     ``torque_ref``; unknown ones (contact) only ``torque_true``.
 
     ``kind = "step"`` holds ``torque`` between the edges. ``kind = "chirp"`` is a
-    logarithmic swept sine of ``amplitude`` [Nm] whose frequency rises from ``f0`` at
+    logarithmic swept sine whose amplitude [Nm] (the file's ``amplitude``) is held in
+    ``torque``, and whose frequency rises from ``f0`` at
     ``start`` to ``f1`` [Hz] at ``stop`` (and stays at ``f1`` while it fades over
     ``rise``): ``f(t) = f0 (f1/f0)^((t - start)/(stop - start))``. A log sweep spends
     equal time per octave, so every octave of 0.5-80 Hz is excited alike.

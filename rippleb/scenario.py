@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from rippleb.data import JointSpec
+from rippleb.drive_ripple import RippleSettings
 from rippleb.errors import InputError
 from rippleb.profiles import DEFAULT_RISE, Load, Segment, evaluate_segments  # noqa: F401 (re-exported)
 
@@ -35,7 +36,9 @@ SEGMENT_KINDS = ("hold", "move", "ramp", "cruise")
 _NUMBER = (float, int)
 _TOP_KEYS = {"description": (str,), "scored": (bool,), "duration": _NUMBER,
              "temperature_c": _NUMBER, "evaluation": (dict,), "joint": (dict,),
-             "robot": (dict,), "trajectory": (dict,), "load": (list,), "faults": (dict,)}
+             "robot": (dict,), "trajectory": (dict,), "load": (list,), "faults": (dict,),
+             "ripple": (dict,)}
+_RIPPLE_KEYS = {"output_scale": _NUMBER, "hysteresis_nm": _NUMBER, "temperature_coeff": _NUMBER}
 _EVAL_KEYS = {"start": _NUMBER, "stop": _NUMBER}
 _JOINT_KEYS = {f.name: ((int,) if f.type in ("int", int) else _NUMBER)
                for f in dataclasses.fields(JointSpec)}
@@ -138,6 +141,9 @@ class Scenario:
         The resolved trajectory and the external torques.
     faults
         Faulty sensors (:class:`Faults`); none by default.
+    ripple
+        Output-locked ripple, hysteresis and the ripple's temperature coefficient
+        (:class:`~rippleb.drive_ripple.RippleSettings`); the documented defaults.
     """
 
     name: str
@@ -154,6 +160,7 @@ class Scenario:
     segments: tuple[Segment, ...]
     loads: tuple[Load, ...]
     faults: Faults = Faults()
+    ripple: RippleSettings = RippleSettings()
 
     def trajectory(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Commanded joint position, velocity, acceleration at times ``t``."""
@@ -328,13 +335,17 @@ class _Parser:
         loads = tuple(self.load(item, i, spec) for i, item in enumerate(top.get("load", [])))
         evaluation = self.evaluation(top.get("evaluation", {}), duration)
         faults = self.faults(top.get("faults", {}), spec)
+        ripple = self.ripple(top.get("ripple", {}), spec)
+        if ripple.temperature_scale(temperature) < 0:
+            self.fail("ripple.temperature_coeff", f"{ripple.temperature_coeff:g} per K would turn the "
+                      f"ripple negative at {temperature:g} degC")
         return Scenario(name=self.name, path=self.path,
                         description=top.get("description", "").strip(),
                         spec=spec, duration=duration, scored=top.get("scored", True),
                         evaluation=evaluation,
                         temperature_c=temperature,
                         robot=robot, joint=joint, posture=posture,
-                        segments=segments, loads=loads, faults=faults)
+                        segments=segments, loads=loads, faults=faults, ripple=ripple)
 
     def spec(self, raw) -> JointSpec:
         values = self.table(raw, _JOINT_KEYS, "joint")
@@ -435,6 +446,18 @@ class _Parser:
         if values.get("dropout_rate", 0) > 0 and values.get("dropout_length", 0) <= 0:
             self.fail("faults.dropout_length", "must be positive when dropout_rate is set")
         return Faults(**{k: float(v) for k, v in values.items()})
+
+    def ripple(self, raw, spec: JointSpec) -> RippleSettings:
+        values = self.table(raw, _RIPPLE_KEYS, "ripple")
+        ranges = {"output_scale": (0.0, 10.0, "in [0, 10]"),
+                  "hysteresis_nm": (0.0, 0.2 * spec.rated_torque,
+                                    f"in [0, 0.2 x rated_torque = {0.2 * spec.rated_torque:g}] Nm"),
+                  "temperature_coeff": (-0.01, 0.01, "in [-0.01, 0.01] per K")}
+        for key, value in values.items():
+            lo, hi, what = ranges[key]
+            if not lo <= value <= hi:
+                self.fail(f"ripple.{key}", f"must be {what}, got {value:g}")
+        return RippleSettings(**{k: float(v) for k, v in values.items()})
 
     def load(self, raw, i: int, spec: JointSpec | None = None) -> Load:
         where = f"load[{i}]"

@@ -27,6 +27,7 @@ import numpy as np
 from rippleb import conditions
 from rippleb.conditions import DEFAULT_CONDITION, check_condition, stable_hash
 from rippleb.data import JointSpec, SensorLog
+from rippleb.drive_ripple import bridge_ripple
 from rippleb.errors import InputError
 from rippleb.scenario import Scenario, load_scenario
 
@@ -295,7 +296,7 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     w_m = N * (qd + twist_rate)
     a_m = N * (qdd + np.gradient(twist_rate, t))
 
-    strain = _strain(device, sc, t, theta_m, tau_true, noise)
+    strain = _strain(device, sc, t, theta_m, tau_true, noise, output_angle=q)
     current = _current(device, sc, spec, theta_m, w_m, a_m, tau_true, noise)
     absolute = np.floor(theta_m / (2 * np.pi) * spec.counts_per_rev).astype(np.int64)
     index = conditions.index_pulses(absolute, conditions.index_count(seed, spec.counts_per_rev),
@@ -337,10 +338,16 @@ def _load_table(sc: Scenario, q: np.ndarray, nominal_seed: int | None = None):
     return robot.load_table(sc.robot, sc.joint, dict(sc.posture), (lo, hi), model=model)
 
 
-def _strain(device: Device, sc: Scenario, t, theta_m, tau, noise) -> np.ndarray:
-    """Bridge voltage (paper eq. 3-5): gain x (torque + ripple) + zero + drift + noise, ADC."""
+def _strain(device: Device, sc: Scenario, t, theta_m, tau, noise, output_angle) -> np.ndarray:
+    """Bridge voltage (paper eq. 3-5): gain x (torque + ripple) + zero + drift + noise, ADC.
+
+    The ripple is the wave-generator ripple plus the output-locked ripple and hysteresis
+    of :func:`rippleb.drive_ripple.bridge_ripple`.
+    """
     zero = device.offset + device.offset_temp_coeff * (sc.temperature_c - REFERENCE_TEMPERATURE_C)
-    volts = (device.gain * (tau + device.ripple(theta_m, tau)) + zero + device.drift_rate * t
+    ripple = bridge_ripple(sc.ripple, device.seed, sc.temperature_c, device.ripple(theta_m, tau),
+                           output_angle, tau)
+    volts = (device.gain * (tau + ripple) + zero + device.drift_rate * t
              + STRAIN_NOISE * noise.standard_normal(len(t)))
     if sc.faults.bridge_drift:   # fault: extra bridge zero drift [V/s]
         volts = volts + sc.faults.bridge_drift * t

@@ -166,7 +166,7 @@ def test_bandwidth_of_a_butterworth_is_its_cutoff(cutoff, order):
 
     truth, info = _chirp_case()
     estimate = sosfilt(butter(order, cutoff, fs=CHIRP_FS, output="sos"), truth)
-    assert bandwidth_hz(estimate, truth, info) == pytest.approx(cutoff, rel=0.06)
+    assert bandwidth_hz(estimate, truth, info) == pytest.approx(cutoff, rel=0.08)
 
 
 def test_bandwidth_ignores_offset_and_uncorrelated_ripple():
@@ -176,7 +176,7 @@ def test_bandwidth_ignores_offset_and_uncorrelated_ripple():
     t = np.arange(len(truth)) / CHIRP_FS
     ripple = 0.6 * np.cos(2 * np.pi * 19.0 * t) + 0.1 * np.random.default_rng(1).normal(size=len(t))
     estimate = sosfilt(butter(2, 30.0, fs=CHIRP_FS, output="sos"), truth) + 5.0 + ripple
-    assert bandwidth_hz(estimate, truth, info) == pytest.approx(30.0, rel=0.06)
+    assert bandwidth_hz(estimate, truth, info) == pytest.approx(30.0, rel=0.08)
 
 
 def test_bandwidth_bounds_and_nan():

@@ -112,7 +112,8 @@ def test_paper_quintic_matches_the_paper_timing_and_stays_within_rated_torque():
     assert moving_t[-1] == pytest.approx(3.79, abs=1e-3)
     assert np.abs(log.torque_true).max() < log.spec.rated_torque
     assert np.abs(log.torque_ref).max() < log.spec.rated_torque
-    # The model torque misses only the unmodelled bearing friction here.
+    # The model torque misses only the unmodelled bearing friction and the nominal
+    # model's error here.
     assert np.sqrt(np.mean((log.torque_true - log.torque_ref) ** 2)) < 1.0
 
 

@@ -78,8 +78,10 @@ def test_reference_model_error_matches_the_spread_it_comes_from():
     variance = np.zeros_like(base)
     for i in range(1, true.njoints):
         link = true.inertias[i]
-        for spread, doubled in ((robot.NOMINAL_MASS_SPREAD, pin.Inertia(2 * link.mass, link.lever, link.inertia)),
-                                (robot.NOMINAL_INERTIA_SPREAD, pin.Inertia(link.mass, link.lever, 2 * link.inertia))):
+        mass_doubled = pin.Inertia(2 * link.mass, link.lever, link.inertia)
+        inertia_doubled = pin.Inertia(link.mass, link.lever, 2 * link.inertia)
+        for spread, doubled in ((robot.NOMINAL_MASS_SPREAD, mass_doubled),
+                                (robot.NOMINAL_INERTIA_SPREAD, inertia_doubled)):
             model = true.copy()
             model.inertias[i] = doubled
             variance += (spread * (eq7(model) - base)) ** 2

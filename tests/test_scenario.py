@@ -104,6 +104,11 @@ CHIRP = '[[load]]\nkind = "chirp"\namplitude = 8.0\nf0 = 0.5\nf1 = 80.0\nstart =
     (GOOD + CHIRP.replace("amplitude = 8.0", "amplitude = 900.0"), "load[0].amplitude", "break"),
     (GOOD + CHIRP.replace('"chirp"', '"sine"'), "load[0].kind", "step, chirp"),
     (GOOD + "[[load]]\ntorque = 1.0\nstart = 0.1\nf0 = 2.0\n", "load[0].f0", "not used by a step"),
+    ("[ripple]\nhysteresis = 1.0\n" + GOOD, "ripple.hysteresis", "hysteresis_nm"),
+    ("[ripple]\nhysteresis_nm = -1.0\n" + GOOD, "ripple.hysteresis_nm", "in [0"),
+    ("[ripple]\noutput_scale = 11\n" + GOOD, "ripple.output_scale", "in [0, 10]"),
+    ("temperature_c = 150.0\n[ripple]\ntemperature_coeff = -0.01\n" + GOOD, "ripple.temperature_coeff",
+     "negative"),
 ])
 def test_bad_files_are_refused_with_file_and_key(tmp_path, text, key, words):
     message = _bad(tmp_path, text)
@@ -166,3 +171,13 @@ def test_step_edges_are_the_on_and_off_edges_of_step_loads():
     assert edges[:, 0].tolist() == [0.8, 1.5, 1.7, 2.2, 2.8, 3.5]
     assert edges[:, 2].tolist() == [15.0, -15.0, -10.0, 10.0, 12.0, -12.0]
     assert load_scenario("torque-chirp").step_edges().shape == (0, 3)
+
+
+def test_ripple_table_sets_the_drive_ripple_and_defaults_are_documented():
+    from rippleb.drive_ripple import HYSTERESIS_NM, RippleSettings
+
+    assert load_scenario("paper-quintic").ripple == RippleSettings()
+    assert RippleSettings().hysteresis_nm == HYSTERESIS_NM and RippleSettings().output_scale == 1.0
+    sc = scenario_from_dict({**BASE, "ripple": {"output_scale": 0, "hysteresis_nm": 1.5,
+                                                "temperature_coeff": 0.002}})
+    assert sc.ripple == RippleSettings(output_scale=0.0, hysteresis_nm=1.5, temperature_coeff=0.002)

@@ -317,6 +317,8 @@ class KalmanRipple(Method):
         self.shift_ = 0       # log count minus calibration-frame count
         self.homed_ = False   # an index pulse has been seen in this run
         self.last_raw_ = None  # last encoder count as logged
+        self.samples_ = 0      # absolute index of the next sample
+        self.restart_at_ = None  # pulse sample at which the map restarts (first homing)
 
     def step(self, block: SensorBlock) -> np.ndarray:
         """One torque estimate [Nm] per sample: the latest tick's posterior, held."""
@@ -344,11 +346,14 @@ class KalmanRipple(Method):
             # linearise the |tau| term of the map at the sign of the predicted torque
             prior = self.x_[0] + self.F_[0, 1] * self.x_[1] if self.torque_rate else self.x_[0]
             H[j, 0] += load[j] if prior > 0 else -load[j] if prior < 0 else 0.0
+            if self.restart_at_ is not None and self.restart_at_ <= self.samples_ + last:
+                self._restart_map()
             kf_step(self.x_, self.P_, self.F_step_, q[j], H[j], y[j], self.r_)
             self.have_estimate_ = True
             self.since_tick_ = 0
             cursor = last
         self._fill(out, block, counts, cursor, len(block))
+        self.samples_ += len(block)
         self.pending_strain_ = strain[done * D:]
         self.pending_encoder_ = encoder[done * D:]
         return out
@@ -377,24 +382,33 @@ class KalmanRipple(Method):
             lo, hi = sorted((int(before), int(encoder[k])))
             lo = min(lo + 1, hi)            # the mark sits on a count edge in (lo - 1, hi]
             if (self.index_mark_ + self.shift_ - lo) % n > hi - lo:   # the frame is off
-                self._rehome((lo + (hi - lo) // 2 - self.index_mark_) % n)
+                self._rehome((lo + (hi - lo) // 2 - self.index_mark_) % n, self.samples_ + int(k))
             self.homed_ = True
             shift[k:] = self.shift_
         self.last_raw_ = encoder[-1]
         return encoder - shift
 
-    def _rehome(self, new_shift: int) -> None:
-        """Move to a new count frame. At the first pulse of a run after a power cycle the
-        ripple estimate gathered in the wrong frame is dropped and the filter starts again
-        from the calibrated map; later small corrections keep the state."""
+    def _rehome(self, new_shift: int, pulse: int) -> None:
+        """Move to a new count frame at the pulse of absolute sample index ``pulse``.
+
+        At the first pulse of a run after a power cycle the ripple estimate gathered in
+        the wrong frame is dropped and the filter restarts from the calibrated map, at the
+        update of the tick that holds the pulse (:meth:`_restart_map`, so the result does
+        not depend on the block cutting); later small corrections keep the state.
+        """
         if not self.homed_:
-            x0, P0 = self._initial_state()
-            m = self.n_torque_
-            self.x_[m:] = x0[m:]
-            self.P_[m:, :] = 0.0
-            self.P_[:, m:] = 0.0
-            self.P_[m:, m:] = P0[m:, m:]
+            self.restart_at_ = pulse
         self.shift_ = int(new_shift)
+
+    def _restart_map(self) -> None:
+        """Ripple coefficients back to the calibrated map and its covariance."""
+        x0, P0 = self._initial_state()
+        m = self.n_torque_
+        self.x_[m:] = x0[m:]
+        self.P_[m:, :] = 0.0
+        self.P_[:, m:] = 0.0
+        self.P_[m:, m:] = P0[m:, m:]
+        self.restart_at_ = None
 
     def _fill(self, out, block, counts, start, stop):
         """Write the current estimate to ``out[start:stop]`` (``counts``: the block's

@@ -301,3 +301,15 @@ def test_dropouts_lose_index_pulses_instead_of_repeating_them():
     n = len(broken)
     assert np.all(healthy.index[:n][broken.index == 1] == 1)
     assert 0 < broken.index.sum() <= healthy.index[:n].sum()
+
+
+@pytest.mark.slow
+def test_kalman_ripple_re_homing_passes_the_conformance_checks_after_a_power_cycle():
+    """Block cutting, determinism and causality hold while the method re-homes."""
+    from rippleb.methods.kalman_ripple import KalmanRipple
+    from rippleb.testing import check_method, slice_log
+
+    log = simulate("paper-quintic", 901, "power-cycled").log
+    pulses = np.flatnonzero(log.index)
+    window = slice_log(log, int(pulses[0]) - 4000, int(pulses[0]) + 4000)   # the first pulse inside
+    check_method(KalmanRipple, log=window, calibration=simulate("calibration", 901).log)

@@ -364,8 +364,9 @@ class KalmanRipple(Method):
 
         At a pulse the mark lies between the counts of the pulse sample and the sample
         before it. One count apart (below fs counts/s) that fixes the frame exactly; when
-        the DAQ skipped counts it fixes it to the skipped range, and the current frame is
-        kept if the mark falls inside that range, else the middle of the range is taken.
+        the DAQ skipped counts it fixes it to the skipped range. The current frame is kept
+        whenever the mark falls inside that range (so a joint still in its calibration
+        session's power-on keeps its frame), else the middle of the range is taken.
         """
         encoder = block.encoder
         pulses = None if block.index is None or getattr(self, "index_mark_", None) is None \
@@ -380,7 +381,7 @@ class KalmanRipple(Method):
         for k in pulses:
             before = encoder[k - 1] if k else (encoder[k] if previous is None else previous)
             lo, hi = sorted((int(before), int(encoder[k])))
-            lo = min(lo + 1, hi)            # the mark sits on a count edge in (lo - 1, hi]
+            lo = min(lo + 1, hi)   # the mark is the edge below one of the counts lo..hi
             if (self.index_mark_ + self.shift_ - lo) % n > hi - lo:   # the frame is off
                 self._rehome((lo + (hi - lo) // 2 - self.index_mark_) % n, self.samples_ + int(k))
             self.homed_ = True

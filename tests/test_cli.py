@@ -56,7 +56,8 @@ def test_debug_shows_the_traceback(tmp_path):
 def test_simulate_run_and_report(tmp_path):
     log = tmp_path / "log.parquet"
     assert rippleb("simulate", "static-contact", "--seed", "1", "--out", log).returncode == 0
-    assert set(pd.read_parquet(log).columns) == {"t", "strain", "encoder", "current", "torque_true", "torque_ref"}
+    assert set(pd.read_parquet(log).columns) == {"t", "strain", "encoder", "current", "index",
+                                                 "torque_true", "torque_ref"}
 
     out = tmp_path / "run"
     proc = rippleb("run", "--methods", "raw,lowpass", "--scenarios", "static-contact", "--seeds", "1",

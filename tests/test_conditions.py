@@ -75,9 +75,10 @@ def test_unknown_condition_is_one_clear_line():
 
 @pytest.mark.parametrize("condition", list(CONDITIONS))
 def test_calibration_session_is_the_same_under_every_condition(condition):
-    base = simulate("calibration", 5).log.columns()
-    other = simulate("calibration", 5, condition).log.columns()
-    assert all(np.array_equal(base[k], other[k]) for k in base)
+    base = simulate("calibration", 5).log
+    other = simulate("calibration", 5, condition).log
+    assert all(np.array_equal(base.columns()[k], other.columns()[k]) for k in base.columns())
+    assert other.meta["condition"] == "same-session"
 
 
 @pytest.mark.parametrize("condition", list(CONDITIONS))

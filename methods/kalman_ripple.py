@@ -27,9 +27,9 @@ Re-homing: the ripple map is a function of the absolute wave-generator angle, bu
 incremental encoder counts from wherever it stood at power-on. When the logs have an
 ``index`` column (the encoder's once-per-revolution index pulse), :meth:`KalmanRipple.fit`
 finds the count of the index mark in the calibration log's frame, and every index pulse of
-a scored run re-homes the count into that frame (:meth:`KalmanRipple.home`): at the first
-pulse after a power cycle the map is turned to the new count, and later pulses correct
-missed or spurious counts. Until the first pulse of a run the count is taken as it
+a scored run re-homes the count into that frame (:class:`~rippleb.methods._homing.IndexHoming`):
+at the first pulse after a power cycle the map restarts in the new frame, and later pulses
+correct missed or spurious counts. Until the first pulse of a run the count is taken as it
 comes, as without an index column: the right frame in the calibration session's power-on,
 a wrong one after a power cycle.
 
@@ -47,6 +47,7 @@ from numba import types
 from rippleb.data import JointSpec, SensorBlock, SensorLog
 from rippleb.dsp import F8, F8_2D, IN_F8, IN_F8_2D, IN_I8, compiled
 from rippleb.method import Method
+from rippleb.methods._homing import IndexHoming, index_mark
 
 IN_I8_2D = types.Array(types.int64, 2, "A", readonly=True)
 IN_C16 = types.Array(types.complex128, 1, "A", readonly=True)
@@ -61,28 +62,6 @@ def phasor_table(counts_per_rev: int) -> np.ndarray:
     bits whatever the block cutting, and is faster than ``cos``/``sin``.
     """
     return np.exp(2j * np.pi * np.arange(counts_per_rev) / counts_per_rev)
-
-
-def index_mark(encoder: np.ndarray, index, counts_per_rev: int):
-    """Count (mod ``counts_per_rev``) of the encoder's index mark in this log's frame, or
-    None without index pulses.
-
-    The mark is the count edge crossed at a pulse: ``max`` of the counts of the pulse
-    sample and the one before, when they are one count apart. Pulses crossed with skipped
-    counts are ambiguous and left out; the most common value wins (a count error in the
-    log would otherwise move it).
-    """
-    if index is None:
-        return None
-    pulses = np.flatnonzero(index)
-    pulses = pulses[pulses > 0]
-    steps = encoder[pulses] - encoder[pulses - 1]
-    clean = pulses[np.abs(steps) == 1]
-    if len(clean) == 0:
-        return None
-    marks = np.maximum(encoder[clean], encoder[clean - 1]) % counts_per_rev
-    values, counts = np.unique(marks, return_counts=True)
-    return int(values[np.argmax(counts)])
 
 
 def tick_regressors(encoder: np.ndarray, orders: np.ndarray, table: np.ndarray) -> np.ndarray:
@@ -391,14 +370,17 @@ class KalmanRipple(Method):
         self.last_count_ = None  # encoder count at the end of the previous tick
         self.estimate_ = None  # posterior torque and torque rate of the latest tick
         self.since_tick_ = 0  # samples since the end of the last tick
-        self.shift_ = 0       # log count minus calibration-frame count
-        self.homed_ = False   # an index pulse has been seen in this run
-        self.last_raw_ = None  # last encoder count as logged
+        self.homing_ = IndexHoming(mark=getattr(self, "index_mark_", None),
+                                   counts_per_rev=int(spec.counts_per_rev))
+        self.samples_ = 0      # absolute index of the next sample
+        self.restart_at_ = None  # pulse sample at which the map restarts (first homing)
 
     def step(self, block: SensorBlock) -> np.ndarray:
         """One torque estimate [Nm] per sample: the latest tick's posterior, held."""
         first = len(self.pending_strain_)  # position of block[0] in the joined arrays
-        counts = self.home(block)
+        counts, pulse = self.homing_.counts(block.encoder, block.index, self.samples_)
+        if pulse is not None:   # first homing of the run moved the frame
+            self.restart_at_ = pulse
         strain = np.concatenate([self.pending_strain_, block.strain])
         encoder = np.concatenate([self.pending_encoder_, counts])
         encoder = encoder.astype(np.int64, copy=False)
@@ -411,9 +393,14 @@ class KalmanRipple(Method):
             y = self.gain_ / D * strain[:done * D].reshape(done, D).sum(axis=1) + self.offset_
             start = ticks[0, 0] if self.last_count_ is None else self.last_count_
             posterior = np.empty((done, 2))
-            filter_ticks(ticks, y, start, self.orders_, self.table_, self.c1_, self.c2_, self.F_,
-                         self.torque_rate, self.q_tick_, self.q_turn_, self.r_, self.x_, self.P_,
-                         posterior)
+            # the tick whose last sample reaches the first homing pulse restarts the map first
+            ends = self.samples_ + np.arange(1, done + 1) * D - 1 - first
+            split = done if self.restart_at_ is None else int(np.searchsorted(ends, self.restart_at_))
+            self._filter(ticks[:split], y[:split], start, posterior[:split])
+            if split < done:
+                self._restart_map()
+                before = ticks[split - 1, -1] if split else start
+                self._filter(ticks[split:], y[split:], before, posterior[split:])
             self.last_count_ = ticks[-1, -1]
         for j in range(done):
             last = (j + 1) * D - 1 - first  # block index of the sample that ends tick j
@@ -422,52 +409,27 @@ class KalmanRipple(Method):
             self.since_tick_ = 0
             cursor = last
         self._fill(out, block, counts, cursor, len(block))
+        self.samples_ += len(block)
         self.pending_strain_ = strain[done * D:]
         self.pending_encoder_ = encoder[done * D:]
         return out
 
-    def home(self, block: SensorBlock) -> np.ndarray:
-        """The block's encoder counts in the calibration log's frame, re-homed on its
-        index pulses.
+    def _filter(self, ticks, y, before, posterior) -> None:
+        """:func:`filter_ticks` on this filter's state (``before``: the count that preceded)."""
+        if len(ticks):
+            filter_ticks(ticks, y, before, self.orders_, self.table_, self.c1_, self.c2_, self.F_,
+                         self.torque_rate, self.q_tick_, self.q_turn_, self.r_, self.x_, self.P_,
+                         posterior)
 
-        At a pulse the mark lies between the counts of the pulse sample and the sample
-        before it. One count apart (below fs counts/s) that fixes the frame exactly; when
-        the DAQ skipped counts it fixes it to the skipped range, and the current frame is
-        kept if the mark falls inside that range, else the middle of the range is taken.
-        """
-        encoder = block.encoder
-        pulses = None if block.index is None or getattr(self, "index_mark_", None) is None \
-            else np.flatnonzero(block.index)
-        if pulses is None or len(pulses) == 0:
-            if len(encoder):
-                self.last_raw_ = encoder[-1]
-            return encoder - self.shift_ if self.shift_ else encoder
-        shift = np.full(len(encoder), self.shift_, dtype=np.int64)
-        n = int(self.spec_.counts_per_rev)
-        previous = self.last_raw_
-        for k in pulses:
-            before = encoder[k - 1] if k else (encoder[k] if previous is None else previous)
-            lo, hi = sorted((int(before), int(encoder[k])))
-            lo = min(lo + 1, hi)            # the mark sits on a count edge in (lo - 1, hi]
-            if (self.index_mark_ + self.shift_ - lo) % n > hi - lo:   # the frame is off
-                self._rehome((lo + (hi - lo) // 2 - self.index_mark_) % n)
-            self.homed_ = True
-            shift[k:] = self.shift_
-        self.last_raw_ = encoder[-1]
-        return encoder - shift
-
-    def _rehome(self, new_shift: int) -> None:
-        """Move to a new count frame. At the first pulse of a run after a power cycle the
-        ripple estimate gathered in the wrong frame is dropped and the filter starts again
-        from the calibrated map; later small corrections keep the state."""
-        if not self.homed_:
-            x0, P0 = self._initial_state()
-            m = self.n_torque_
-            self.x_[m:] = x0[m:]
-            self.P_[m:, :] = 0.0
-            self.P_[:, m:] = 0.0
-            self.P_[m:, m:] = P0[m:, m:]
-        self.shift_ = int(new_shift)
+    def _restart_map(self) -> None:
+        """Ripple coefficients back to the calibrated map and its covariance."""
+        x0, P0 = self._initial_state()
+        m = self.n_torque_
+        self.x_[m:] = x0[m:]
+        self.P_[m:, :] = 0.0
+        self.P_[:, m:] = 0.0
+        self.P_[m:, m:] = P0[m:, m:]
+        self.restart_at_ = None
 
     def _fill(self, out, block, counts, start, stop):
         """Write the current estimate to ``out[start:stop]`` (``counts``: the block's

@@ -235,7 +235,7 @@ class OrderTracking(Method):
 
     name = "order-tracking"
 
-    def __init__(self, q: float = 20.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.001,
+    def __init__(self, q: float = 30.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.0015,
                  dead_zone: bool = True, back_propagation: bool = True):
         self.q = q
         self.orders = orders
@@ -347,7 +347,7 @@ class OrderTrackingNoDeadzone(OrderTracking):
 
     name = "order-tracking-no-deadzone"
 
-    def __init__(self, q: float = 20.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.001,
+    def __init__(self, q: float = 30.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.0015,
                  dead_zone: bool = False, back_propagation: bool = True):
         super().__init__(q=q, orders=orders, stop_after_s=stop_after_s, dead_zone=dead_zone,
                          back_propagation=back_propagation)
@@ -358,7 +358,7 @@ class OrderTrackingNoBackprop(OrderTracking):
 
     name = "order-tracking-no-backprop"
 
-    def __init__(self, q: float = 20.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.001,
+    def __init__(self, q: float = 30.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.0015,
                  dead_zone: bool = True, back_propagation: bool = False):
         super().__init__(q=q, orders=orders, stop_after_s=stop_after_s, dead_zone=dead_zone,
                          back_propagation=back_propagation)

@@ -303,7 +303,8 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
                                     spec.counts_per_rev)
     # An incremental counter counts from wherever it stood when the log started.
     encoder = absolute if session.counter_start is None else absolute - absolute[0] + session.counter_start
-    meta = {"scenario": sc.name, "seed": seed, "condition": condition}
+    # the calibration session is the first session whatever the condition asked for
+    meta = {"scenario": sc.name, "seed": seed, "condition": condition if sc.scored else DEFAULT_CONDITION}
     if sc.faults.active:
         # Own generator: a faulty scenario's healthy signals stay those of the same
         # scenario without faults, and scenarios without faults are untouched.

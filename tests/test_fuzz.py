@@ -152,7 +152,8 @@ def test_random_scenario_files_give_a_log_or_one_line(doc, garbage):
         code, err = _cli("simulate", path, "--out", out)
         if code == 0:
             frame = pd.read_csv(out)
-            assert list(frame.columns) == ["t", "strain", "encoder", "current", "index", "torque_true", "torque_ref"]
+            assert list(frame.columns) == ["t", "strain", "encoder", "current", "index", "torque_true",
+                                           "torque_ref"]
             assert len(frame) >= 2 and np.isfinite(frame.to_numpy()).all()
         else:
             _assert_one_line(code, err, str(path))

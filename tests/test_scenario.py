@@ -21,8 +21,8 @@ def test_every_builtin_is_short_described_and_in_range(name):
     sc = load_scenario(name)
     assert sc.name == name and sc.description
     # scored scenarios stay short so a full benchmark is quick; calibration is simulated
-    # once per device and sweeps several speeds, so it may be longer
-    assert 0 < sc.duration <= (8.0 if sc.scored else 15.0)
+    # once per device and sweeps several speeds down to creep, so it may be longer
+    assert 0 < sc.duration <= (8.0 if sc.scored else 16.5)
     start, stop = sc.evaluation
     assert 0 <= start < stop <= sc.duration
 

@@ -47,9 +47,12 @@ MAIN_HASHES = {
     },
 }
 
-#: A constant-speed run without external load: the ripple seen at matched load.
+#: A constant-speed run without external load: the ripple seen at matched load. The drive's
+#: output-locked ripple and hysteresis are switched off: they are the same under every
+#: condition but scale with the gauge gain, so they would blur the gauge terms measured here.
 CRUISE = scenario_from_dict({
     "temperature_c": 40.0,
+    "ripple": {"output_scale": 0.0, "hysteresis_nm": 0.0},
     "robot": {"posture": {"elbow_joint": 1.5}},
     "trajectory": {"start": -2.0, "segment": [
         {"kind": "ramp", "velocity": 0.3, "duration": 0.2},

@@ -258,3 +258,49 @@ def test_a_running_directory_is_locked_and_an_interrupted_one_resumable(site, tm
     assert resumed.returncode == 0, resumed.stderr
     rows = pd.read_csv(out / "results.csv")
     assert list(rows.method) == ["napper", "raw"] and list(rows.status) == ["ok", "ok"]
+
+
+SPAWNS = textwrap.dedent('''
+    import os, subprocess, time
+    import numpy as np
+    from rippleb import Method
+
+    class Spawns(Method):
+        name = "spawns"
+        def fit(self, calibration):
+            subprocess.Popen(["sleep", "987"], start_new_session=True)
+            if os.fork() == 0:
+                os.setsid()
+                os.execvp("sleep", ["sleep", "988"])
+            time.sleep(0.2)
+        def step(self, block):
+            return np.zeros(len(block))
+''')
+
+
+@pytest.mark.parametrize("namespaces", [True, False], ids=["pid-namespace", "subreaper-only"])
+def test_no_process_outlives_its_row(tmp_path, monkeypatch, namespaces):
+    """With and without PID namespaces (where the kernel refuses them, the keeper is a
+    child subreaper that kills every descendant)."""
+    import importlib
+
+    import rippleb
+    from rippleb import isolation
+    from rippleb.registry import Entry, Registry
+
+    (tmp_path / "spawns_mod.py").write_text(SPAWNS)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    cls = importlib.import_module("spawns_mod").Spawns
+    if not namespaces:
+        monkeypatch.setattr(isolation, "new_pid_namespace", lambda: False)
+    real = Registry.discover
+
+    def discover(registry_cls, group="rippleb.methods"):
+        found = real(group)
+        found.entries["spawns"] = Entry("spawns", "plugin", "tests", cls=cls)
+        return found
+    monkeypatch.setattr(Registry, "discover", classmethod(discover))
+    frame = rippleb.run(methods="spawns", scenarios="static-contact", seeds=1)
+    assert list(frame.status) == ["ok"], frame.message.tolist()
+    time.sleep(0.3)
+    assert _spawned() == []

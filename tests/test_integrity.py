@@ -26,7 +26,18 @@ HOSTILE = textwrap.dedent('''
     from rippleb import Method
 
     def _cache_files():
-        return glob.glob(os.path.join(tempfile.gettempdir(), "rippleb-cache-*", "*"))
+        """Every cache file a plugin could find: the temporary directory, the run directory
+        below the working directory, and the directories of its inherited file descriptors."""
+        found = glob.glob(os.path.join(tempfile.gettempdir(), "rippleb-cache-*", "*"))
+        found += glob.glob(os.path.join("*", ".cache", "*"))
+        for fd in os.listdir("/proc/self/fd"):
+            try:
+                target = os.readlink(f"/proc/self/fd/{fd}")
+            except OSError:
+                continue
+            if target.startswith("/"):
+                found += glob.glob(os.path.join(os.path.dirname(target), ".cache", "*"))
+        return sorted(set(found))
 
     class Forger(Method):
         """Rewrites every cached log it can find: the strain of every other row x 100."""
@@ -39,6 +50,8 @@ HOSTILE = textwrap.dedent('''
                         arrays = {k: npz[k] for k in npz.files}
                     if "strain" in arrays:
                         arrays["strain"] = arrays["strain"] * 100.0
+                    if "torque_true" in arrays:
+                        arrays["torque_true"] = arrays["torque_true"] + 30.0
                     buf = io.BytesIO()
                     np.savez(buf, **arrays)
                     with open(path, "wb") as fh:

@@ -308,7 +308,10 @@ def _execute(registry, plan: _Plan, *, out, jobs, timeout, memory_mb, resume, pr
         if resume:
             _say_retried(results.drop_environmental(), out_dir)
         done = results.done_keys()
-        rows = sorted(k for k in plan.rows if (k.method, k.scenario, k.condition, k.seed) not in done)
+        # Case-major order: the rows of one simulated log run together, so its truth is
+        # released soon and memory stays bounded by the cases in flight, not the whole run.
+        rows = sorted((k for k in plan.rows if (k.method, k.scenario, k.condition, k.seed) not in done),
+                      key=lambda k: (k.seed, k.scenario, k.condition, k.method))
         with tempfile.TemporaryDirectory(prefix="rippleb-cache-") as cache:
             state = _State(plan, registry, results, Path(cache), _log_dir(out_dir), timeout,
                            time.strftime("%Y%m%dT%H%M%S"), rows)

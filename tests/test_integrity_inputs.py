@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 import rippleb
-from rippleb import InputError, JointSpec, make_log
+from rippleb import InputError
 from rippleb.results import COLUMNS, RunWarning, read_rows
 from test_runner import fake, fake_simulate  # noqa: F401 - the fixture is used by name
 

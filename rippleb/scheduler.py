@@ -127,7 +127,7 @@ def _start_next(pool: Pool, state: State, bar) -> bool:
         failed = [state.sims.get(_sim_key(c), "") for c in (case, cal_case)]
         failed = [f for f in failed if f.startswith("failed")]
         if failed:
-            _record(state, key, bar, status="error", message=f"simulation {failed[0]}")
+            _record(state, key, bar, status="error", message=_environment_first(f"simulation {failed[0]}"))
             return True
         if not all(c in state.artefacts for c in (case, cal_case)):
             continue
@@ -203,7 +203,14 @@ def _fit_outcome(fin, state: State) -> dict:
             return {"status": "error", "message": f"fit sent an unreadable result ({type(exc).__name__})"}
     if fin.kind == "timeout":
         return {"status": "timeout", "message": f"fit killed after {state.timeout:g} s"}
-    return {"status": "error", "message": f"fit: {_why(fin, state)}"}
+    return {"status": "error", "message": _environment_first(f"fit: {_why(fin, state)}")}
+
+
+def _environment_first(message: str) -> str:
+    """Move an environmental marker to the front, where ``--resume`` looks for it."""
+    if ENVIRONMENT in message and not message.startswith(ENVIRONMENT):
+        return ENVIRONMENT + message.replace(ENVIRONMENT, "", 1)
+    return message
 
 
 def _row_job(key: RowKey, state: State, fit: dict):

@@ -1,5 +1,6 @@
 """Integrity of what a run reads: row identity, resume input, recorded logs, options, conditions."""
 
+import os
 import subprocess
 import sys
 import textwrap
@@ -311,3 +312,22 @@ def test_report_refuses_a_missing_metric_column(fake, tmp_path):
     pd.read_csv(path).drop(columns=["rms_error_nm"]).to_csv(path, index=False)
     proc = cli("report", tmp_path / "run", "--no-figures", "--out", tmp_path / "rep")
     assert proc.returncode == 2 and "missing column(s) rms_error_nm" in proc.stderr
+
+
+def test_a_full_disk_is_environmental_and_retried(fake, tmp_path, monkeypatch):
+    import errno
+
+    import rippleb.jobs
+
+    real_store = rippleb.jobs.store
+
+    def full(path, data):
+        raise InputError(f"{path}: cannot write: {os.strerror(errno.ENOSPC)}")
+    monkeypatch.setattr(rippleb.jobs, "store", full)
+    frame = rippleb.run(methods="raw", scenarios="creep", seeds=1, out=tmp_path)
+    assert frame.loc[0, "status"] == "error" and frame.loc[0, "message"].startswith("environment: ")
+    assert "No space left on device" in frame.loc[0, "message"]
+    monkeypatch.setattr(rippleb.jobs, "store", real_store)   # the disk has room again
+    with pytest.warns(RunWarning, match="environmental reason"):
+        again = rippleb.run(methods="raw", scenarios="creep", seeds=1, out=tmp_path, resume=True)
+    assert list(again.status) == ["ok"]

@@ -1,5 +1,6 @@
 """Integrity of what a run reads: row identity, resume input, recorded logs, options, conditions."""
 
+import os
 import subprocess
 import sys
 import textwrap
@@ -11,7 +12,7 @@ import pandas as pd
 import pytest
 
 import rippleb
-from rippleb import InputError, JointSpec, make_log
+from rippleb import InputError
 from rippleb.results import COLUMNS, RunWarning, read_rows
 from test_runner import fake, fake_simulate  # noqa: F401 - the fixture is used by name
 
@@ -281,3 +282,78 @@ def test_a_non_empty_out_is_refused_without_resume(fake, tmp_path):
     with pytest.raises(InputError, match="not empty .*--resume"):
         rippleb.run(methods="raw", scenarios="creep", seeds=1, out=tmp_path)
     assert (tmp_path / "results.csv").read_bytes() == before and len(first) == 1
+
+
+# ----------------------------------------------------------------------------- report trusts nothing
+
+
+def _results_for_report(tmp_path):
+    rippleb.run(methods="raw,perfect", scenarios="paper-quintic", seeds=2, out=tmp_path / "run")
+    return tmp_path / "run" / "results.csv"
+
+
+def test_report_ignores_duplicated_and_unreadable_rows_with_one_warning(fake, tmp_path):
+    path = _results_for_report(tmp_path)
+    frame = pd.read_csv(path)
+    duplicated = pd.concat([frame, frame.iloc[[0]]])
+    duplicated["rms_error_nm"] = duplicated["rms_error_nm"].astype(object)
+    duplicated.iloc[1, duplicated.columns.get_loc("rms_error_nm")] = "oops"
+    duplicated.to_csv(path, index=False)
+    proc = cli("report", tmp_path / "run", "--no-figures", "--out", tmp_path / "rep")
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert proc.stderr.count("rippleb: warning:") >= 1 and "ignored 2 row(s)" in proc.stderr
+    readme = (tmp_path / "rep" / "README.md").read_text()
+    assert "2 seeds" in readme and "3 seeds" not in readme   # the duplicate is not an extra seed
+
+
+def test_report_refuses_a_missing_metric_column(fake, tmp_path):
+    path = _results_for_report(tmp_path)
+    pd.read_csv(path).drop(columns=["rms_error_nm"]).to_csv(path, index=False)
+    proc = cli("report", tmp_path / "run", "--no-figures", "--out", tmp_path / "rep")
+    assert proc.returncode == 2 and "missing column(s) rms_error_nm" in proc.stderr
+
+
+def test_a_full_disk_is_environmental_and_retried(fake, tmp_path, monkeypatch):
+    import errno
+
+    import rippleb.jobs
+
+    real_store = rippleb.jobs.store
+
+    def full(path, data):
+        raise InputError(f"{path}: cannot write: {os.strerror(errno.ENOSPC)}")
+    monkeypatch.setattr(rippleb.jobs, "store", full)
+    frame = rippleb.run(methods="raw", scenarios="creep", seeds=1, out=tmp_path)
+    assert frame.loc[0, "status"] == "error" and frame.loc[0, "message"].startswith("environment: ")
+    assert "No space left on device" in frame.loc[0, "message"]
+    monkeypatch.setattr(rippleb.jobs, "store", real_store)   # the disk has room again
+    with pytest.warns(RunWarning, match="environmental reason"):
+        again = rippleb.run(methods="raw", scenarios="creep", seeds=1, out=tmp_path, resume=True)
+    assert list(again.status) == ["ok"]
+
+
+def test_simulate_passes_the_condition(tmp_path, monkeypatch):
+    import rippleb.simulator
+    from rippleb.cli import main
+
+    seen = []
+
+    def recording(scenario, seed, condition="same-session"):
+        seen.append(condition)
+        return fake_simulate(scenario, seed, condition)
+    monkeypatch.setattr(rippleb.simulator, "simulate", recording)
+    assert main(["simulate", "creep", "--condition", "power-cycled", "--out", str(tmp_path / "x.csv")]) == 0
+    assert seen == ["power-cycled"] and (tmp_path / "x.csv").is_file()
+
+
+def test_resume_may_add_methods_and_says_so(fake, tmp_path):
+    import json
+
+    rippleb.run(methods="raw", scenarios="creep", seeds=1, out=tmp_path)
+    with pytest.warns(RunWarning, match="adding method"):
+        both = rippleb.run(methods="raw,perfect", scenarios="creep", seeds=1, out=tmp_path, resume=True)
+    assert sorted(both.method) == ["perfect", "raw"]
+    assert json.loads((tmp_path / "run.json").read_text())["methods"] == ["raw", "perfect"]
+    with pytest.raises(InputError, match=r"methods \['raw', 'perfect'\], asked \['raw'\]"):
+        rippleb.run(methods="raw", scenarios="creep", seeds=1, out=tmp_path, resume=True)

@@ -99,6 +99,9 @@ def shifted_map(fitted: AngleAdaptive, shift_counts: int) -> np.ndarray:
 
 def measure(seeds) -> None:
     """Print convergence (revolutions to 10 % map error) on the calibration logs."""
+    for rate in (1.0, 5.0, 20.0):
+        print(f"drift over {60 * rate:.0f} revolutions at {rate:g} rev/s, RMS error over the last third:",
+              {k: round(v, 4) for k, v in drift(rate).items()}, flush=True)
     print("| seed | wrong map: other device | wrong map: origin moved 611 counts |")
     print("|---|---|---|")
     for s in seeds:
@@ -151,6 +154,45 @@ def emulate_power_cycle(seeds, scenarios, methods) -> None:
                 rows[m][1].append(evaluate(cls, cal_i, cycled, truth)["rms_error_nm"])
         for m in methods:
             print(f"| {scenario} | {m} | {np.mean(rows[m][0]):.3f} | {np.mean(rows[m][1]):.3f} |", flush=True)
+
+
+def drift(rev_per_s: float = 5.0, seconds: float = 60.0, seed: int = 0) -> dict:
+    """RMS error [Nm] while the ripple map drifts from one device's map to another's.
+
+    A synthetic joint turning at ``rev_per_s`` whose strain follows the method's model
+    exactly, plus 0.01 Nm of white noise and a slow torque swing; the map coefficients move
+    linearly from the calibration map of seed 100 to that of seed 101 over the whole run
+    (``seconds * rev_per_s`` revolutions). Returns the RMS error over the last third for
+    ``angle-adaptive`` and ``angle-adaptive-frozen`` (warm-started from the first map).
+    """
+    from rippleb.data import make_log
+    from rippleb.methods.angle_adaptive import angle_regressors, map_rows, phasor_table
+
+    fitted = AngleAdaptive()
+    fitted.fit(simulate("calibration", 100).log.for_method(keep_ref=True))
+    start, end = fitted.map_, other_device_map(100)
+    spec = simulate("calibration", 100).log.spec
+    n = int(seconds * spec.fs)
+    t = np.arange(n) / spec.fs
+    encoder = np.floor(rev_per_s * t * spec.counts_per_rev).astype(np.int64)
+    base = 5.0 + 10.0 * np.sin(2 * np.pi * 0.2 * t)
+    phi = angle_regressors(encoder, np.asarray(fitted.orders), phasor_table(int(spec.counts_per_rev)))
+    w = start + (t / seconds)[:, None] * (end - start)
+    strain = base + np.sum(map_rows(phi, base) * w, axis=1)
+    tau = strain - np.sum(map_rows(phi, strain) * w, axis=1)
+    strain = strain + np.random.default_rng(seed).normal(0, 0.01, n)
+    log = make_log(spec, {"t": t, "strain": (strain - fitted.offset_) / fitted.gain_, "encoder": encoder,
+                          "current": np.zeros(n), "torque_true": tau}, source="drift")
+    tail = slice(2 * n // 3, n)
+    out = {}
+    for name, adapt in (("angle-adaptive", True), ("angle-adaptive-frozen", False)):
+        method = AngleAdaptive(adapt=adapt)
+        method.gain_, method.offset_, method.map_, method.r_ = fitted.gain_, fitted.offset_, start, fitted.r_
+        method.home_ = None
+        method.reset(spec)
+        estimate = np.concatenate([method.step(b) for b in log.blocks(int(spec.fs))])
+        out[name] = float(np.sqrt(np.mean((estimate - tau)[tail] ** 2)))
+    return out
 
 
 def main(argv=None) -> None:

@@ -107,17 +107,22 @@ class AngleAdaptive(Method):
     memory_revs
         Forgetting time constant in wave-generator revolutions (chosen on calibration).
     prior_sd_nm
-        Initial standard deviation of each map coefficient about the calibration map [Nm
-        per unit regressor]; the warm start's confidence (chosen on calibration).
+        Initial standard deviation of each map coefficient about the calibration map, in Nm
+        of ripple (the load terms: at rated torque); the warm start's confidence (chosen on
+        calibration).
     floor_sd_nm
-        Standard deviation of the stabilising floor the forgetting tends to [Nm]: how
-        strongly an unexcited coefficient is pulled back to the calibration map.
+        Standard deviation of the stabilising floor the forgetting tends to, in the same
+        units: how strongly an unexcited coefficient is held near the calibration map.
     min_counts
         Encoder counts a tick must turn by to enter the fit; below it the angle is taken
         as not moving and nothing is learned (chosen on calibration).
     update_ticks
         The map is re-solved every ``update_ticks`` control ticks (on absolute tick
         numbers, so the output does not depend on the block cutting).
+    outlier_gate
+        A tick whose second difference departs from the calibration map's by more than
+        this many times (noise + the map's own second difference) is not learned from
+        (an unknown torque step); see :meth:`_plausible`.
     adapt
         False: the calibration map only (the ``angle-adaptive-frozen`` ablation).
     """
@@ -126,13 +131,14 @@ class AngleAdaptive(Method):
 
     def __init__(self, orders: tuple = (1, 2, 4, 6, 8), memory_revs: float = 30.0,
                  prior_sd_nm: float = 0.03, floor_sd_nm: float = 1.0, min_counts: int = 2,
-                 update_ticks: int = 10, adapt: bool = True):
+                 update_ticks: int = 10, outlier_gate: float = 4.0, adapt: bool = True):
         self.orders = orders
         self.memory_revs = memory_revs
         self.prior_sd_nm = prior_sd_nm
         self.floor_sd_nm = floor_sd_nm
         self.min_counts = min_counts
         self.update_ticks = update_ticks
+        self.outlier_gate = outlier_gate
         self.adapt = adapt
 
     # ------------------------------------------------------------------ fit
@@ -183,6 +189,8 @@ class AngleAdaptive(Method):
         self.orders_ = np.asarray(self.orders, dtype=np.int64)
         self.table_ = phasor_table(self.cpr_)
         n = len(self.map_)
+        m = 2 * len(self.orders_)
+        self.scale_ = np.concatenate([np.ones(m), np.full(2 * m, float(spec.rated_torque) ** 2)])
         self.prior_info_ = 1.0 / self.prior_sd_nm ** 2
         self.floor_info_ = 1.0 / self.floor_sd_nm ** 2
         self.frame_ = self.home_ or 0   # angle origin in counts; the calibration's until homed
@@ -242,11 +250,17 @@ class AngleAdaptive(Method):
 
     # ----------------------------------------------------------- the law
     def _solve(self, info, vec, weight):
-        """``(D + pi I)^-1 (d + pi w_cal)``, batched over leading axes."""
-        n = len(self.map_)
-        A = info + weight[..., None, None] * np.eye(n) if np.ndim(weight) else info + weight * np.eye(n)
-        b = vec + (weight[..., None] if np.ndim(weight) else weight) * self.map_
-        return np.linalg.solve(A, b[..., None])[..., 0]
+        """``(D + pi S)^-1 (d + pi S w_cal)``, batched over leading axes.
+
+        ``S`` (:attr:`scale_`) is diagonal: 1 for the no-load coefficients, the rated torque
+        squared for the load terms, so ``prior_sd_nm`` and ``floor_sd_nm`` are both in Nm of
+        ripple at rated load. ``S`` is constant over each (cos, sin) pair of every block, so
+        re-homing rotations leave it unchanged.
+        """
+        weight = np.asarray(weight, dtype=float)[..., None] * self.scale_
+        A = info.copy()
+        A[..., np.arange(len(self.map_)), np.arange(len(self.map_))] += weight
+        return np.linalg.solve(A, (vec + weight * self.map_)[..., None])[..., 0]
 
     def _advance(self, strain: np.ndarray, encoder: np.ndarray) -> np.ndarray:
         """Process samples (a block or a part of one): learn from complete ticks, subtract."""
@@ -295,7 +309,7 @@ class AngleAdaptive(Method):
         ticks = encoder.reshape(T, D)
         phi = angle_regressors(ticks - self.frame_, self.orders_, self.table_).mean(axis=1)
         psi, z, moved, steps = self._differences(phi, ybar, ticks[:, -1])
-        gate = (moved >= self.min_counts) / self.r_
+        gate = ((moved >= self.min_counts) & self._plausible(psi, z)) / self.r_
         turns = steps / self.cpr_
         U = int(self.update_ticks)
         lead = self.ticks_done_ % U
@@ -326,6 +340,25 @@ class AngleAdaptive(Method):
         self.ticks_done_ += T
         ends = ((np.arange(P) + 1) * U - lead) * D  # relative to strain[0]
         return maps, ends
+
+    def _plausible(self, psi, z):
+        """False for ticks whose second difference no ripple can explain: a torque step.
+
+        The innovation against the calibration map, ``z - psi . w_cal``, is compared with
+        ``outlier_gate`` times the noise (``sqrt(r_)``) plus
+        ``|d2 phi| (|c0| + |y| (|c1| + |c2|))``, the largest second difference a map of the
+        calibrated size can give at this tick and load (Cauchy-Schwarz per block;
+        ``|psi . w_cal|`` itself passes through zero where the ripple does not). A map wrong by
+        up to ``outlier_gate - 1`` times its own size still passes; an unknown torque step of
+        several Nm (load-steps) does not. The test uses the fixed calibration map, not the
+        running estimate, so it does not depend on where the stream is cut, and a run of
+        rejections cannot feed on itself.
+        """
+        m = 2 * len(self.orders_)
+        c0, c1, c2 = (np.linalg.norm(self.map_[i * m:(i + 1) * m]) for i in range(3))
+        load = np.abs(psi[:, 2 * m:]).sum(axis=1) / np.maximum(np.abs(psi[:, :m]).sum(axis=1), 1e-300)
+        size = np.linalg.norm(psi[:, :m], axis=1) * (c0 + load * (c1 + c2))
+        return np.abs(z - psi @ self.map_) <= self.outlier_gate * (np.sqrt(self.r_) + size)
 
     def _differences(self, phi, ybar, end):
         """Second differences of the regressors and tick means over consecutive ticks.
@@ -395,7 +428,7 @@ class AngleAdaptiveFrozen(AngleAdaptive):
 
     def __init__(self, orders: tuple = (1, 2, 4, 6, 8), memory_revs: float = 30.0,
                  prior_sd_nm: float = 0.03, floor_sd_nm: float = 1.0, min_counts: int = 2,
-                 update_ticks: int = 10, adapt: bool = False):
+                 update_ticks: int = 10, outlier_gate: float = 4.0, adapt: bool = False):
         super().__init__(orders=orders, memory_revs=memory_revs, prior_sd_nm=prior_sd_nm,
-                         floor_sd_nm=floor_sd_nm, min_counts=min_counts,
-                         update_ticks=update_ticks, adapt=adapt)
+                         floor_sd_nm=floor_sd_nm, min_counts=min_counts, update_ticks=update_ticks,
+                         outlier_gate=outlier_gate, adapt=adapt)

@@ -15,7 +15,9 @@ defaults of :class:`rippleb.methods.angle_adaptive.AngleAdaptive`;
 ``docs/methods/angle-adaptive.md`` shows the table this prints.
 
 Run: ``python benchmarks/angle_adaptive_tuning.py [--seeds 100,101,102]``; with ``--measure``
-it prints the convergence time in revolutions instead (same logs, nothing tuned).
+it prints the convergence time in revolutions and the drift tracking instead (nothing tuned),
+with ``--power-cycle SCENARIOS`` the scores under an emulated power cycle, with ``--speed``
+the per-tick cost against an ``lfilter`` yardstick.
 """
 
 from __future__ import annotations
@@ -195,6 +197,55 @@ def drift(rev_per_s: float = 5.0, seconds: float = 60.0, seed: int = 0) -> dict:
     return out
 
 
+def speed(rounds: int = 5000) -> None:
+    """Per-tick cost against one ``scipy.signal.lfilter`` call with state, same blocks, same run.
+
+    One ``step`` per 20-sample control tick of stop-restart (seed 0), ``rounds`` ticks, for
+    both angle-adaptive classes, ``kalman-ripple`` and ``order-tracking``; then the
+    throughput on 1-second blocks. The machine may be loaded: read the ratios.
+    """
+    import time
+
+    import scipy.signal
+
+    from rippleb.registry import Registry
+
+    registry = Registry.discover()
+    calibration = simulate("calibration", 0).log.for_method(keep_ref=True)
+    visible = simulate("stop-restart", 0).log.for_method(keep_ref=False)
+    blocks = list(visible.blocks())[:rounds]
+    b, a = scipy.signal.butter(2, 0.05)
+    state = np.zeros(2)
+    ticks = []
+    for block in blocks:
+        t0 = time.perf_counter()
+        _, state = scipy.signal.lfilter(b, a, block.strain, zi=state)
+        ticks.append(time.perf_counter() - t0)
+    yard = np.array(ticks)
+    print(f"lfilter with state, 20 samples: p50 {np.median(yard) * 1e6:.1f} us, "
+          f"p99 {np.percentile(yard, 99) * 1e6:.1f} us")
+    for name in ("angle-adaptive", "angle-adaptive-frozen", "kalman-ripple", "order-tracking"):
+        method = registry.get(name).load()()
+        method.fit(calibration)
+        method.reset(visible.spec)
+        ticks = []
+        for block in blocks:
+            t0 = time.perf_counter()
+            method.step(block)
+            ticks.append(time.perf_counter() - t0)
+        ticks = np.array(ticks)
+        method.reset(visible.spec)
+        t0 = time.perf_counter()
+        for block in visible.blocks(int(visible.spec.fs)):
+            method.step(block)
+        rate = len(visible) / (time.perf_counter() - t0)
+        print(f"{name}: p50 {np.median(ticks) * 1e6:.1f} us ({np.median(ticks) / np.median(yard):.1f}x), "
+              f"mean {ticks.mean() * 1e6:.1f} us ({ticks.mean() / yard.mean():.1f}x), "
+              f"p99 {np.percentile(ticks, 99) * 1e6:.1f} us "
+              f"({np.percentile(ticks, 99) / np.percentile(yard, 99):.1f}x); "
+              f"1-s blocks {rate / 1e6:.2f} M samples/s", flush=True)
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", default="100,101,102")
@@ -203,8 +254,12 @@ def main(argv=None) -> None:
     parser.add_argument("--power-cycle", metavar="SCENARIOS",
                         help="score angle-adaptive(-frozen), kalman-ripple, order-tracking on these "
                              "scored scenarios under an emulated power cycle (a measurement, not tuning)")
+    parser.add_argument("--speed", action="store_true", help="measure the per-tick cost instead")
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(",")]
+    if args.speed:
+        speed()
+        return
     if args.power_cycle:
         emulate_power_cycle(seeds, args.power_cycle.split(","),
                             ["angle-adaptive", "angle-adaptive-frozen", "kalman-ripple", "order-tracking"])

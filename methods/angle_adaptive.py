@@ -130,7 +130,7 @@ class AngleAdaptive(Method):
     name = "angle-adaptive"
 
     def __init__(self, orders: tuple = (1, 2, 4, 6, 8), memory_revs: float = 30.0,
-                 prior_sd_nm: float = 0.03, floor_sd_nm: float = 1.0, min_counts: int = 2,
+                 prior_sd_nm: float = 0.3, floor_sd_nm: float = 1.0, min_counts: int = 2,
                  update_ticks: int = 10, outlier_gate: float = 4.0, adapt: bool = True):
         self.orders = orders
         self.memory_revs = memory_revs
@@ -427,7 +427,7 @@ class AngleAdaptiveFrozen(AngleAdaptive):
     name = "angle-adaptive-frozen"
 
     def __init__(self, orders: tuple = (1, 2, 4, 6, 8), memory_revs: float = 30.0,
-                 prior_sd_nm: float = 0.03, floor_sd_nm: float = 1.0, min_counts: int = 2,
+                 prior_sd_nm: float = 0.3, floor_sd_nm: float = 1.0, min_counts: int = 2,
                  update_ticks: int = 10, outlier_gate: float = 4.0, adapt: bool = False):
         super().__init__(orders=orders, memory_revs=memory_revs, prior_sd_nm=prior_sd_nm,
                          floor_sd_nm=floor_sd_nm, min_counts=min_counts, update_ticks=update_ticks,

@@ -32,9 +32,9 @@ from rippleb.methods.angle_adaptive import AngleAdaptive, rotation
 from rippleb.metrics import Truth, score
 from rippleb.simulator import simulate
 
-MEMORY_REVS = (3.0, 10.0, 30.0, 100.0, 300.0)
-PRIOR_SD_NM = (0.003, 0.01, 0.03, 0.1, 0.3, 1.0)
-MIN_COUNTS = (1, 2, 5)
+MEMORY_REVS = (3.0, 10.0, 30.0, 100.0)
+PRIOR_SD_NM = (0.01, 0.03, 0.1, 0.3, 1.0)
+MIN_COUNTS = (2,)
 
 
 def calibration_score(params: dict, sim, other_map=None) -> float:

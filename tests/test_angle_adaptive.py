@@ -33,11 +33,12 @@ def with_index(log, index_count: int, count_offset: int = 0):
     return dataclasses.replace(log, index=index, encoder=log.encoder + count_offset)
 
 
-def synthetic_log(coef, *, seconds=4.0, speed_rev_s=5.0, torque=None, moving=True):
+def synthetic_log(coef, *, seconds=4.0, speed_rev_s=5.0, torque=None, moving=True, noise=0.01):
     """A joint turning at ``speed_rev_s`` whose strain follows the method's model exactly.
 
     Gain 1, offset 0; the strain is ``torque`` plus the map, and the true torque is the
-    strain minus the map at that strain (the model's load terms are in the measured strain).
+    strain minus the map at that strain (the model's load terms are in the measured strain),
+    plus ``noise`` [Nm] of white noise (the simulator's strain noise is about 0.01 Nm).
     """
     n = int(seconds * SPEC.fs)
     t = np.arange(n) / SPEC.fs
@@ -46,6 +47,7 @@ def synthetic_log(coef, *, seconds=4.0, speed_rev_s=5.0, torque=None, moving=Tru
     phi = angle_regressors(encoder, ORDERS, phasor_table(CPR))
     strain = base + ripple(phi, base, np.asarray(coef))
     tau = strain - ripple(phi, strain, np.asarray(coef))
+    strain = strain + np.random.default_rng(7).normal(0.0, noise, n)  # DAQ noise, Nm
     columns = {"t": t, "strain": strain, "encoder": encoder, "current": np.zeros(n),
                "torque_ref": tau, "torque_true": tau}
     return make_log(SPEC, columns, source="synthetic")
@@ -127,7 +129,12 @@ def test_no_adaptation_at_rest():
 @pytest.mark.parametrize("cls", [AngleAdaptive, AngleAdaptiveFrozen])
 def test_rehoming_after_a_power_cycle(cls):
     """Counts shifted by an arbitrary offset: from the first index pulse on, the estimate
-    is that of the log without the shift (the learned information is rotated exactly)."""
+    is that of the log without the shift.
+
+    Frozen: exactly. Adaptive: the information learned before the pulse is rotated exactly,
+    but which ticks passed the innovation gate before it depended on the (then misplaced)
+    map, so the two runs differ by what those few ticks taught: far less than the error of
+    the misplaced map before the pulse."""
     calibration, log = default_logs()
     method = cls()
     method.fit(with_index(calibration, 700).for_method(keep_ref=True))
@@ -135,9 +142,13 @@ def test_rehoming_after_a_power_cycle(cls):
     shifted_log = with_index(log, 700, count_offset=987_654)
     shifted = run(method, shifted_log)
     pulse = int(np.flatnonzero(shifted_log.index)[0])
-    np.testing.assert_allclose(shifted[pulse:], reference[pulse:], atol=1e-9)
-    # and before the pulse the unknown origin costs something (the test can fail)
-    assert np.abs(shifted[:pulse] - reference[:pulse]).max() > 1e-3
+    before = np.sqrt(np.mean((shifted[:pulse] - reference[:pulse]) ** 2))
+    assert before > 0.05  # before the pulse the unknown origin costs something
+    if cls is AngleAdaptiveFrozen:
+        np.testing.assert_allclose(shifted[pulse:], reference[pulse:], atol=1e-9)
+    else:
+        after = np.sqrt(np.mean((shifted[pulse:] - reference[pulse:]) ** 2))
+        assert after < 0.1 * before
 
 
 def test_without_index_a_shifted_map_is_relearned():

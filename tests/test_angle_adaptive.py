@@ -177,3 +177,20 @@ def test_rotation_keeps_the_ripple(shift, count, seed, y):
     new = map_rows(angle_regressors(np.array([count - shift]), ORDERS, table), np.array([y])) @ (T @ w)
     np.testing.assert_allclose(new, old, atol=1e-9)
     np.testing.assert_allclose(T @ T.T, np.eye(30), atol=1e-12)
+
+
+def test_torque_step_while_moving_is_not_learned():
+    """A 15 Nm step rising over 10 ms at 5 rev/s: the innovation gate keeps it out of the map;
+    without the gate the same step drags the map away (the test can fail)."""
+    coef = random_map(5)
+    n = int(4 * SPEC.fs)
+    t = np.arange(n) / SPEC.fs
+    torque = 5.0 + 15.0 * np.clip((t - 2.0) / 0.01, 0.0, 1.0)
+    drift = {}
+    for gate in (4.0, np.inf):
+        method = AngleAdaptive(outlier_gate=gate)
+        method.fit(synthetic_log(coef).for_method(keep_ref=True))
+        run(method, synthetic_log(coef, seconds=4.0, torque=torque))
+        drift[gate] = np.abs(method.w_[:10] - method.map_[:10]).max()
+    assert drift[4.0] < 0.05
+    assert drift[np.inf] > 2 * drift[4.0]

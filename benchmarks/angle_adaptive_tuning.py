@@ -15,7 +15,9 @@ defaults of :class:`rippleb.methods.angle_adaptive.AngleAdaptive`;
 ``docs/methods/angle-adaptive.md`` shows the table this prints.
 
 Run: ``python benchmarks/angle_adaptive_tuning.py [--seeds 100,101,102]``; with ``--measure``
-it prints the convergence time in revolutions instead (same logs, nothing tuned).
+it prints the convergence time in revolutions and the drift tracking instead (nothing tuned),
+with ``--power-cycle SCENARIOS`` the scores under an emulated power cycle, with ``--speed``
+the per-tick cost against an ``lfilter`` yardstick.
 """
 
 from __future__ import annotations
@@ -30,9 +32,9 @@ from rippleb.methods.angle_adaptive import AngleAdaptive, rotation
 from rippleb.metrics import Truth, score
 from rippleb.simulator import simulate
 
-MEMORY_REVS = (3.0, 10.0, 30.0, 100.0, 300.0)
-PRIOR_SD_NM = (0.003, 0.01, 0.03, 0.1)
-MIN_COUNTS = (1, 2, 5)
+MEMORY_REVS = (3.0, 10.0, 30.0, 100.0)
+PRIOR_SD_NM = (0.01, 0.03, 0.1, 0.3, 1.0)
+MIN_COUNTS = (2,)
 
 
 def calibration_score(params: dict, sim, other_map=None) -> float:
@@ -99,6 +101,9 @@ def shifted_map(fitted: AngleAdaptive, shift_counts: int) -> np.ndarray:
 
 def measure(seeds) -> None:
     """Print convergence (revolutions to 10 % map error) on the calibration logs."""
+    for rate in (1.0, 5.0, 20.0):
+        print(f"drift over {60 * rate:.0f} revolutions at {rate:g} rev/s, RMS error over the last third:",
+              {k: round(v, 4) for k, v in drift(rate).items()}, flush=True)
     print("| seed | wrong map: other device | wrong map: origin moved 611 counts |")
     print("|---|---|---|")
     for s in seeds:
@@ -153,6 +158,94 @@ def emulate_power_cycle(seeds, scenarios, methods) -> None:
             print(f"| {scenario} | {m} | {np.mean(rows[m][0]):.3f} | {np.mean(rows[m][1]):.3f} |", flush=True)
 
 
+def drift(rev_per_s: float = 5.0, seconds: float = 60.0, seed: int = 0) -> dict:
+    """RMS error [Nm] while the ripple map drifts from one device's map to another's.
+
+    A synthetic joint turning at ``rev_per_s`` whose strain follows the method's model
+    exactly, plus 0.01 Nm of white noise and a slow torque swing; the map coefficients move
+    linearly from the calibration map of seed 100 to that of seed 101 over the whole run
+    (``seconds * rev_per_s`` revolutions). Returns the RMS error over the last third for
+    ``angle-adaptive`` and ``angle-adaptive-frozen`` (warm-started from the first map).
+    """
+    from rippleb.data import make_log
+    from rippleb.methods.angle_adaptive import angle_regressors, map_rows, phasor_table
+
+    fitted = AngleAdaptive()
+    fitted.fit(simulate("calibration", 100).log.for_method(keep_ref=True))
+    start, end = fitted.map_, other_device_map(100)
+    spec = simulate("calibration", 100).log.spec
+    n = int(seconds * spec.fs)
+    t = np.arange(n) / spec.fs
+    encoder = np.floor(rev_per_s * t * spec.counts_per_rev).astype(np.int64)
+    base = 5.0 + 10.0 * np.sin(2 * np.pi * 0.2 * t)
+    phi = angle_regressors(encoder, np.asarray(fitted.orders), phasor_table(int(spec.counts_per_rev)))
+    w = start + (t / seconds)[:, None] * (end - start)
+    strain = base + np.sum(map_rows(phi, base) * w, axis=1)
+    tau = strain - np.sum(map_rows(phi, strain) * w, axis=1)
+    strain = strain + np.random.default_rng(seed).normal(0, 0.01, n)
+    log = make_log(spec, {"t": t, "strain": (strain - fitted.offset_) / fitted.gain_, "encoder": encoder,
+                          "current": np.zeros(n), "torque_true": tau}, source="drift")
+    tail = slice(2 * n // 3, n)
+    out = {}
+    for name, adapt in (("angle-adaptive", True), ("angle-adaptive-frozen", False)):
+        method = AngleAdaptive(adapt=adapt)
+        method.gain_, method.offset_, method.map_, method.r_ = fitted.gain_, fitted.offset_, start, fitted.r_
+        method.home_ = None
+        method.reset(spec)
+        estimate = np.concatenate([method.step(b) for b in log.blocks(int(spec.fs))])
+        out[name] = float(np.sqrt(np.mean((estimate - tau)[tail] ** 2)))
+    return out
+
+
+def speed(rounds: int = 5000) -> None:
+    """Per-tick cost against one ``scipy.signal.lfilter`` call with state, same blocks, same run.
+
+    One ``step`` per 20-sample control tick of stop-restart (seed 0), ``rounds`` ticks, for
+    both angle-adaptive classes, ``kalman-ripple`` and ``order-tracking``; then the
+    throughput on 1-second blocks. The machine may be loaded: read the ratios.
+    """
+    import time
+
+    import scipy.signal
+
+    from rippleb.registry import Registry
+
+    registry = Registry.discover()
+    calibration = simulate("calibration", 0).log.for_method(keep_ref=True)
+    visible = simulate("stop-restart", 0).log.for_method(keep_ref=False)
+    blocks = list(visible.blocks())[:rounds]
+    b, a = scipy.signal.butter(2, 0.05)
+    state = np.zeros(2)
+    ticks = []
+    for block in blocks:
+        t0 = time.perf_counter()
+        _, state = scipy.signal.lfilter(b, a, block.strain, zi=state)
+        ticks.append(time.perf_counter() - t0)
+    yard = np.array(ticks)
+    print(f"lfilter with state, 20 samples: p50 {np.median(yard) * 1e6:.1f} us, "
+          f"p99 {np.percentile(yard, 99) * 1e6:.1f} us")
+    for name in ("angle-adaptive", "angle-adaptive-frozen", "kalman-ripple", "order-tracking"):
+        method = registry.get(name).load()()
+        method.fit(calibration)
+        method.reset(visible.spec)
+        ticks = []
+        for block in blocks:
+            t0 = time.perf_counter()
+            method.step(block)
+            ticks.append(time.perf_counter() - t0)
+        ticks = np.array(ticks)
+        method.reset(visible.spec)
+        t0 = time.perf_counter()
+        for block in visible.blocks(int(visible.spec.fs)):
+            method.step(block)
+        rate = len(visible) / (time.perf_counter() - t0)
+        print(f"{name}: p50 {np.median(ticks) * 1e6:.1f} us ({np.median(ticks) / np.median(yard):.1f}x), "
+              f"mean {ticks.mean() * 1e6:.1f} us ({ticks.mean() / yard.mean():.1f}x), "
+              f"p99 {np.percentile(ticks, 99) * 1e6:.1f} us "
+              f"({np.percentile(ticks, 99) / np.percentile(yard, 99):.1f}x); "
+              f"1-s blocks {rate / 1e6:.2f} M samples/s", flush=True)
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", default="100,101,102")
@@ -161,8 +254,12 @@ def main(argv=None) -> None:
     parser.add_argument("--power-cycle", metavar="SCENARIOS",
                         help="score angle-adaptive(-frozen), kalman-ripple, order-tracking on these "
                              "scored scenarios under an emulated power cycle (a measurement, not tuning)")
+    parser.add_argument("--speed", action="store_true", help="measure the per-tick cost instead")
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(",")]
+    if args.speed:
+        speed()
+        return
     if args.power_cycle:
         emulate_power_cycle(seeds, args.power_cycle.split(","),
                             ["angle-adaptive", "angle-adaptive-frozen", "kalman-ripple", "order-tracking"])

@@ -36,10 +36,6 @@ import numpy as np
 from rippleb.data import JointSpec, SensorBlock, SensorLog
 from rippleb.method import Method
 
-#: exp() arguments are kept below this within one vectorised chunk of periods
-MAX_LOG_DECAY = 200.0
-
-
 def phasor_table(counts_per_rev: int) -> np.ndarray:
     """``exp(2j pi n / counts_per_rev)`` for every encoder position ``n`` (exact per count)."""
     return np.exp(2j * np.pi * np.arange(counts_per_rev) / counts_per_rev)
@@ -107,17 +103,27 @@ class AngleAdaptive(Method):
     memory_revs
         Forgetting time constant in wave-generator revolutions (chosen on calibration).
     prior_sd_nm
-        Initial standard deviation of each map coefficient about the calibration map [Nm
-        per unit regressor]; the warm start's confidence (chosen on calibration).
+        Initial standard deviation of each map coefficient about the calibration map, in Nm
+        of ripple (the load terms: at rated torque); the warm start's confidence (chosen on
+        calibration).
     floor_sd_nm
-        Standard deviation of the stabilising floor the forgetting tends to [Nm]: how
-        strongly an unexcited coefficient is pulled back to the calibration map.
+        Standard deviation of the stabilising floor the forgetting tends to, in the same
+        units: how strongly an unexcited coefficient is held near the calibration map.
     min_counts
         Encoder counts a tick must turn by to enter the fit; below it the angle is taken
         as not moving and nothing is learned (chosen on calibration).
     update_ticks
         The map is re-solved every ``update_ticks`` control ticks (on absolute tick
         numbers, so the output does not depend on the block cutting).
+    outlier_gate
+        Innovation gate in standard deviations: a tick whose second difference the map
+        cannot explain within its own uncertainty is not learned from (an unknown torque
+        step); see :meth:`_consistent`.
+    max_jolt_counts
+        A tick whose end count has a second difference (over three ticks) above this is
+        not learned from: the motor jumped through the gear compliance under a sudden
+        torque. Counting quantisation alone gives at most 1 at constant speed, and the
+        scenarios' smooth accelerations well under 1 count per tick squared.
     adapt
         False: the calibration map only (the ``angle-adaptive-frozen`` ablation).
     """
@@ -125,14 +131,17 @@ class AngleAdaptive(Method):
     name = "angle-adaptive"
 
     def __init__(self, orders: tuple = (1, 2, 4, 6, 8), memory_revs: float = 30.0,
-                 prior_sd_nm: float = 0.03, floor_sd_nm: float = 1.0, min_counts: int = 2,
-                 update_ticks: int = 10, adapt: bool = True):
+                 prior_sd_nm: float = 0.3, floor_sd_nm: float = 1.0, min_counts: int = 2,
+                 update_ticks: int = 10, outlier_gate: float = 4.0, max_jolt_counts: int = 2,
+                 adapt: bool = True):
         self.orders = orders
         self.memory_revs = memory_revs
         self.prior_sd_nm = prior_sd_nm
         self.floor_sd_nm = floor_sd_nm
         self.min_counts = min_counts
         self.update_ticks = update_ticks
+        self.outlier_gate = outlier_gate
+        self.max_jolt_counts = max_jolt_counts
         self.adapt = adapt
 
     # ------------------------------------------------------------------ fit
@@ -183,6 +192,8 @@ class AngleAdaptive(Method):
         self.orders_ = np.asarray(self.orders, dtype=np.int64)
         self.table_ = phasor_table(self.cpr_)
         n = len(self.map_)
+        m = 2 * len(self.orders_)
+        self.scale_ = np.concatenate([np.ones(m), np.full(2 * m, float(spec.rated_torque) ** 2)])
         self.prior_info_ = 1.0 / self.prior_sd_nm ** 2
         self.floor_info_ = 1.0 / self.floor_sd_nm ** 2
         self.frame_ = self.home_ or 0   # angle origin in counts; the calibration's until homed
@@ -191,9 +202,7 @@ class AngleAdaptive(Method):
         self.info_ = np.zeros((n, n))   # data information (D), frame of frame_
         self.vec_ = np.zeros(n)         # data information vector (d)
         self.weight_ = self.prior_info_  # prior weight pi: rho, forgets towards delta
-        self.acc_info_ = np.zeros((n, n))  # the open update period
-        self.acc_vec_ = np.zeros(n)
-        self.acc_turns_ = 0.0
+        self.cov_ = np.diag(1.0 / (self.weight_ * self.scale_))
         self.history_ = None            # the last two complete ticks: (phi, y, end count)
         self.pending_ = (np.empty(0), np.empty(0, dtype=np.int64))
         self.ticks_done_ = 0
@@ -232,21 +241,29 @@ class AngleAdaptive(Method):
         self.frame_ = count
         self.info_ = T @ self.info_ @ T.T
         self.vec_ = T @ self.vec_
-        self.acc_info_ = T @ self.acc_info_ @ T.T
-        self.acc_vec_ = T @ self.acc_vec_
         if self.history_ is not None:
             phi, y, end = self.history_
             m = 2 * len(self.orders_)
             self.history_ = (phi @ T[:m, :m].T, y, end)
-        self.w_ = self._solve(self.info_, self.vec_, self.weight_) if self.adapt else self.map_.copy()
+        if self.adapt:
+            self._solve()
+        else:
+            self.w_ = self.map_.copy()
 
     # ----------------------------------------------------------- the law
-    def _solve(self, info, vec, weight):
-        """``(D + pi I)^-1 (d + pi w_cal)``, batched over leading axes."""
-        n = len(self.map_)
-        A = info + weight[..., None, None] * np.eye(n) if np.ndim(weight) else info + weight * np.eye(n)
-        b = vec + (weight[..., None] if np.ndim(weight) else weight) * self.map_
-        return np.linalg.solve(A, b[..., None])[..., 0]
+    def _solve(self) -> None:
+        """``w = C (d + pi S w_cal)`` with ``C = (D + pi S)^-1``, from the current information.
+
+        ``S`` (:attr:`scale_`) is diagonal: 1 for the no-load coefficients, the rated torque
+        squared for the load terms, so ``prior_sd_nm`` and ``floor_sd_nm`` are both in Nm of
+        ripple at rated load. ``S`` is constant over each (cos, sin) pair of every block, so
+        re-homing rotations leave it unchanged.
+        """
+        prior = self.weight_ * self.scale_
+        A = self.info_.copy()
+        A.flat[::len(prior) + 1] += prior
+        self.cov_ = np.linalg.inv(A)
+        self.w_ = self.cov_ @ (self.vec_ + prior * self.map_)
 
     def _advance(self, strain: np.ndarray, encoder: np.ndarray) -> np.ndarray:
         """Process samples (a block or a part of one): learn from complete ticks, subtract."""
@@ -280,52 +297,56 @@ class AngleAdaptive(Method):
         return y - ripple(phi, y, np.asarray(weights)[which])
 
     def _learn(self, strain, encoder):
-        """Fold complete ticks into the information; return the maps solved at period ends.
+        """Fold whole update periods of ticks into the information; the map after each.
+
+        Per period ``p``: ``D = l D + sum psi psi' / r``, ``d = l d + sum psi z / r``,
+        ``pi = l pi + (1 - l) / floor_sd^2`` with ``l = exp(-revolutions / memory_revs)``,
+        then ``w = (D + pi S)^-1 (d + pi S w_cal)``. A tick enters only if the angle moved
+        smoothly (:attr:`min_counts`, :attr:`max_jolt_counts`) and its innovation passes the
+        gate of :meth:`_consistent`.
 
         Returns
         -------
         maps
-            ``(P, n)``: the map after each update period that ended in these ticks.
+            ``(P, n)``: the map after each update period.
         ends
             ``(P,)``: the sample (relative to ``strain[0]``) from which each map applies.
         """
-        D = self.tick_
-        T = len(strain) // D
+        D, U = self.tick_, int(self.update_ticks)
+        T = len(strain) // D  # a whole number of update periods (see _advance)
         ybar = self.gain_ * strain.reshape(T, D).mean(axis=1) + self.offset_
         ticks = encoder.reshape(T, D)
         phi = angle_regressors(ticks - self.frame_, self.orders_, self.table_).mean(axis=1)
-        psi, z, moved, steps = self._differences(phi, ybar, ticks[:, -1])
-        gate = (moved >= self.min_counts) / self.r_
-        turns = steps / self.cpr_
-        U = int(self.update_ticks)
-        lead = self.ticks_done_ % U
-        P = (lead + T) // U  # update periods completed in these ticks
-        pad = P * U + U - (lead + T) if (lead + T) % U else P * U - (lead + T)
-        grid = lead + T + pad
-        X = np.zeros((grid, psi.shape[1]))
-        X[lead:lead + T] = psi * np.sqrt(gate)[:, None]
-        Z = np.zeros(grid)
-        Z[lead:lead + T] = z * np.sqrt(gate)
-        R = np.zeros(grid)
-        R[lead:lead + T] = turns
-        periods = grid // U
-        X = X.reshape(periods, U, -1)
-        Xt = X.transpose(0, 2, 1)
-        S = Xt @ X  # batched BLAS; einsum would not use it
-        s = (Xt @ Z.reshape(periods, U, 1))[..., 0]
-        rev = R.reshape(periods, U).sum(axis=1)
-        S[0] += self.acc_info_
-        s[0] += self.acc_vec_
-        rev[0] += self.acc_turns_
-        maps = self._recurse(S[:P], s[:P], rev[:P])
-        if P < periods:  # the open period carries over
-            self.acc_info_, self.acc_vec_, self.acc_turns_ = S[P], s[P], float(rev[P])
-        else:
-            n = psi.shape[1]
-            self.acc_info_, self.acc_vec_, self.acc_turns_ = np.zeros((n, n)), np.zeros(n), 0.0
+        psi, z, moved, steps, jolt = self._differences(phi, ybar, ticks[:, -1])
+        usable = (moved >= self.min_counts) & (jolt <= self.max_jolt_counts)
+        P = T // U
+        decay = np.exp(-steps.reshape(P, U).sum(axis=1) / (self.cpr_ * float(self.memory_revs)))
+        maps = np.empty((P, len(self.map_)))
+        for p in range(P):
+            rows = slice(p * U, (p + 1) * U)
+            keep = usable[rows] & self._consistent(psi[rows], z[rows])
+            X = psi[rows][keep]
+            self.info_ = decay[p] * self.info_ + (X.T @ X) / self.r_
+            self.vec_ = decay[p] * self.vec_ + (X.T @ z[rows][keep]) / self.r_
+            self.weight_ = decay[p] * self.weight_ + (1.0 - decay[p]) * self.floor_info_
+            self._solve()
+            maps[p] = self.w_
         self.ticks_done_ += T
-        ends = ((np.arange(P) + 1) * U - lead) * D  # relative to strain[0]
-        return maps, ends
+        return maps, np.arange(1, P + 1) * U * D
+
+    def _consistent(self, psi, z):
+        """Innovation gate: False for ticks no ripple within the map's uncertainty explains.
+
+        The innovation ``z - psi . w`` of the current map is compared with ``outlier_gate``
+        standard deviations of its predicted spread, ``r + psi' C psi`` (``C`` the
+        covariance of the map): the usual chi-square gate of a Kalman filter. An unknown
+        torque step (load-steps: 15 Nm in 10 ms gives second differences of 0.8 Nm per tick)
+        fails it; a map that is still uncertain (warm start, or after a long rest nothing
+        was learned in) has a wide gate. Forgetting runs on revolutions whether ticks pass
+        or not, so a map the gate has locked out widens its own gate again.
+        """
+        spread = self.r_ + np.einsum("ij,jk,ik->i", psi, self.cov_, psi)
+        return (z - psi @ self.w_) ** 2 <= self.outlier_gate ** 2 * spread
 
     def _differences(self, phi, ybar, end):
         """Second differences of the regressors and tick means over consecutive ticks.
@@ -343,9 +364,10 @@ class AngleAdaptive(Method):
 
         Returns
         -------
-        psi, z, moved
-            Rows, second differences and the counts turned in the last and the previous
-            tick (the smaller of the two: both intervals must turn for the angle to move).
+        psi, z, moved, steps, jolt
+            Rows, second differences, the counts turned in the last and the previous tick
+            (the smaller of the two: both intervals must turn for the angle to move), the
+            counts turned in the last tick, and the second difference of the end counts.
         """
         if self.history_ is None:  # repeat the first tick: zero differences, gate closed
             self.history_ = (np.repeat(phi[:1], 2, axis=0), np.repeat(ybar[:1], 2),
@@ -359,33 +381,8 @@ class AngleAdaptive(Method):
         z = y_all[2:] - 2.0 * y_all[1:-1] + y_all[:-2]
         steps = np.abs(np.diff(end_all)).astype(float)
         moved = np.minimum(steps[1:], steps[:-1])
-        return map_rows(d2phi, y_all[:-2]), z, moved, steps[1:]
-
-    def _recurse(self, S, s, rev):
-        """``D_p = l_p D_{p-1} + S_p`` (same for ``d``, ``pi`` to ``delta``), solved per period.
-
-        Vectorised with the cumulative decay ``L_p = prod l``: ``D_p = L_p (D_0 + sum S_i / L_i)``,
-        in chunks that keep ``1 / L`` finite.
-        """
-        P = len(S)
-        if P == 0:
-            return np.empty((0, len(self.map_)))
-        log_decay = np.cumsum(rev) / float(self.memory_revs)
-        maps = []
-        start = 0
-        while start < P:
-            base = log_decay[start - 1] if start else 0.0
-            stop = start + int(np.searchsorted(log_decay[start:] - base, MAX_LOG_DECAY, side="right"))
-            stop = max(stop, start + 1)
-            g = log_decay[start:stop] - base
-            L = np.exp(-g)
-            info = L[:, None, None] * (self.info_ + np.cumsum(S[start:stop] / L[:, None, None], axis=0))
-            vec = L[:, None] * (self.vec_ + np.cumsum(s[start:stop] / L[:, None], axis=0))
-            weight = self.floor_info_ + (self.weight_ - self.floor_info_) * L
-            maps.append(self._solve(info, vec, weight))
-            self.info_, self.vec_, self.weight_ = info[-1], vec[-1], float(weight[-1])
-            start = stop
-        return np.concatenate(maps)
+        jolt = np.abs(end_all[2:] - 2 * end_all[1:-1] + end_all[:-2])
+        return map_rows(d2phi, y_all[:-2]), z, moved, steps[1:], jolt
 
 
 class AngleAdaptiveFrozen(AngleAdaptive):
@@ -394,8 +391,9 @@ class AngleAdaptiveFrozen(AngleAdaptive):
     name = "angle-adaptive-frozen"
 
     def __init__(self, orders: tuple = (1, 2, 4, 6, 8), memory_revs: float = 30.0,
-                 prior_sd_nm: float = 0.03, floor_sd_nm: float = 1.0, min_counts: int = 2,
-                 update_ticks: int = 10, adapt: bool = False):
+                 prior_sd_nm: float = 0.3, floor_sd_nm: float = 1.0, min_counts: int = 2,
+                 update_ticks: int = 10, outlier_gate: float = 4.0, max_jolt_counts: int = 2,
+                 adapt: bool = False):
         super().__init__(orders=orders, memory_revs=memory_revs, prior_sd_nm=prior_sd_nm,
-                         floor_sd_nm=floor_sd_nm, min_counts=min_counts,
-                         update_ticks=update_ticks, adapt=adapt)
+                         floor_sd_nm=floor_sd_nm, min_counts=min_counts, update_ticks=update_ticks,
+                         outlier_gate=outlier_gate, max_jolt_counts=max_jolt_counts, adapt=adapt)

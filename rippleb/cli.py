@@ -35,7 +35,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         where = getattr(args, "out_dir", None)
-        kept = f"; finished rows are in {where / 'results.csv'}" if where else ""
+        kept = (f"; finished rows are in {where / 'results.csv'}; finish the run with "
+                f"'rippleb run --resume {where}'") if where else ""
         print(f"rippleb: interrupted{kept}", file=sys.stderr)
         return 130
 
@@ -91,7 +92,8 @@ def _add_run(sub) -> None:
     p.add_argument("--log", type=Path, help="run on a recorded log (.csv or .parquet) instead of scenarios")
     p.add_argument("--calibration", type=Path,
                    help="with --log: the calibration log (needs torque_ref); default: the log itself, "
-                        "with a warning, since fitting on the scored log flatters every method")
+                        "with a warning: a scored log is not a calibration recording, so some methods "
+                        "fit worse on it and others better, and the rows compare no method fairly")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_run)
 
@@ -108,16 +110,28 @@ def _add_simulate(sub) -> None:
 
 
 def _add_report(sub) -> None:
-    p = sub.add_parser("report", help="write the published comparison of a run (tables, figures, provenance)",
-                       description="From DIR/results.csv write OUT/README.md (method x scenario matrix "
-                                   "with 95%% confidence intervals over seeds, ranking, the paper's "
-                                   "Table I replica, failed rows, provenance), OUT/results.csv, "
-                                   "OUT/provenance.json and OUT/figures/*.png. See docs/report.md.")
+    p = sub.add_parser("report", help="write the report of a run (tables, figures, provenance; --html)",
+                       description="From DIR/results.csv write OUT/README.md (method x condition summary "
+                                   "and headline; per condition the method x scenario matrices with 95 %% "
+                                   "confidence intervals over seeds, timing, ranking, the paper's "
+                                   "Table I replica; failed rows; provenance), OUT/results.csv, "
+                                   "OUT/provenance.json, OUT/figures/ and, with --html, OUT/index.html. "
+                                   "See docs/report.md.")
     p.add_argument("dir", type=Path, metavar="DIR")
     p.add_argument("--out", type=Path, help="output directory (default DIR/report/; the published one is results/)")
     p.add_argument("--no-figures", action="store_true", help="tables and provenance only")
     p.add_argument("--figure-seed", type=int, default=0,
                    help="device seed re-simulated for the signal figures (default 0)")
+    p.add_argument("--speed-seeds", type=int, metavar="N",
+                   help="error-against-speed figure: mean over the first N seeds of the run "
+                        "(default: every seed; each one is re-simulated)")
+    p.add_argument("--format", choices=("png", "svg", "pdf"), default="png", help="figure format (default png)")
+    p.add_argument("--html", action="store_true",
+                   help="also write OUT/index.html: one self-contained interactive page (sortable "
+                        "tables, zoomable figures, provenance), opened without network")
+    p.add_argument("--published", action="store_true",
+                   help="title and caveats of the project's published comparison (results/, see "
+                        "docs/report.md); without it the report says it is the report of one run")
     p.set_defaults(func=cmd_report)
 
 
@@ -148,7 +162,7 @@ def cmd_list(args) -> int:
 
 def cmd_run(args) -> int:
     """``rippleb run``."""
-    from rippleb.report import collect_provenance
+    from rippleb.provenance import collect_provenance
 
     start = time.perf_counter()
     provenance = collect_provenance(args.argv)
@@ -199,9 +213,11 @@ def _run(args, start: float) -> int:
         frame = runner.run_log(args.log, args.calibration, args.methods, jobs=args.jobs,
                                out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress)
         if args.calibration is None:
-            print("rippleb: warning: no --calibration: methods are fitted on the scored log "
-                  "itself, which flatters every method; pass a separate calibration recording",
-                  file=sys.stderr)
+            print("rippleb: warning: no --calibration: methods were fitted on the scored log itself, "
+                  "which is not a calibration recording (a method that needs motion both ways or "
+                  "several speeds may fit worse, or fail; one that fits the ripple may fit better "
+                  "than it could on new data); pass --calibration FILE, e.g. from "
+                  "'rippleb simulate calibration'", file=sys.stderr)
     elif args.resume is not None:
         config = runner.read_config(args.resume)
         args.out_dir = args.resume
@@ -217,19 +233,21 @@ def _run(args, start: float) -> int:
                            runner.DEFAULT_SEEDS if args.seeds is None else args.seeds,
                            seed_start=args.seed_start or 0, jobs=args.jobs, out=args.out_dir,
                            timeout=timeout, memory_mb=memory, progress=progress)
-    from rippleb.report import summary_markdown
+    from rippleb.tables import summary_text
 
-    print(summary_markdown(frame))
+    print(summary_text(frame))
     counts = frame["status"].value_counts().to_dict() if len(frame) else {}
     print(f"\n{len(frame)} rows ({', '.join(f'{v} {k}' for k, v in counts.items()) or 'none'}) "
           f"in {args.out_dir / 'results.csv'}; total wall time {time.perf_counter() - start:.1f} s")
+    print(f"Next: rippleb report {args.out_dir} (tables with intervals, figures; --html for the "
+          f"interactive page)")
     return _report_broken_plugins(frame)
 
 
 def _report_broken_plugins(frame) -> int:
     """One stderr line per requested plugin that failed to import; exit 1 if any.
 
-    Its rows are kept with status ``error`` and the other methods ran (DESIGN.md), but a
+    Its rows are kept with status ``error`` and the other methods ran (docs/design.md), but a
     run asked to include a method it could not load is not a clean run.
     """
     from rippleb.errors import PluginError
@@ -267,11 +285,19 @@ def cmd_report(args) -> int:
     """``rippleb report``."""
     from rippleb.report import report
 
+    seeds = None
+    if args.speed_seeds is not None:
+        if args.speed_seeds < 1:
+            raise InputError(f"--speed-seeds {args.speed_seeds}: must be at least 1")
+        seeds = args.speed_seeds
     written = report(args.dir, args.out, figures=not args.no_figures, figure_seed=args.figure_seed,
-                     argv=args.argv)
+                     argv=args.argv, published=args.published, html=args.html,
+                     figure_format=args.format, speed_seeds=seeds)
     for warning in written["warnings"]:
         print(f"rippleb: warning: {warning}", file=sys.stderr)
     print(f"wrote {written['readme']}, {written['csv']}, {written['provenance']}"
           + (f" and {len(written['figures'])} figures in {written['readme'].parent / 'figures'}"
              if written["figures"] else ""))
+    if written["html"] is not None:
+        print(f"open {written['html']} in a browser (self-contained: no network needed)")
     return 0

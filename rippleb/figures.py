@@ -224,11 +224,15 @@ def _save(fig, out_png) -> Path:
     return out
 
 
+MOTION_EDGE_LABEL = "joint starts or stops moving"
+
+
 def _motion_edges(ax, sig: ScenarioSignals) -> None:
-    """Dashed verticals where the joint starts and stops (as in the paper's Figs. 4-6)."""
+    """Dashed verticals where the joint starts and stops (as in the paper's Figs. 4-6),
+    labelled once so the legend says what they are."""
     t, moving = sig.sim.log.t, np.asarray(sig.sim.moving, bool)
-    for i in np.flatnonzero(np.diff(moving.astype(int))) + 1:
-        ax.axvline(t[i], color="k", lw=0.7, ls="--", alpha=0.6)
+    for k, i in enumerate(np.flatnonzero(np.diff(moving.astype(int))) + 1):
+        ax.axvline(t[i], color="k", lw=0.7, ls="--", alpha=0.6, label=None if k else MOTION_EDGE_LABEL)
 
 
 def plot_trajectory(sig: ScenarioSignals, out_png) -> Path:
@@ -283,7 +287,7 @@ def plot_estimates(sig: ScenarioSignals, out_png, seed: int = 0) -> Path:
     ``torque_ref`` (eq. 7) on ``paper-quintic``, one panel per method; the first panel
     is the paper's own pair, current-based and order tracking."""
     plt = _pyplot()
-    from rippleb.report import method_order
+    from rippleb.stats import method_order
 
     log = sig.sim.log
     names = method_order(sig.estimates)
@@ -321,11 +325,22 @@ def plot_estimates(sig: ScenarioSignals, out_png, seed: int = 0) -> Path:
     return _save(fig, out_png)
 
 
-def error_by_speed(signals, n_bins: int = 12) -> dict:
+def speed_edges(signals, n_bins: int = 12) -> np.ndarray:
+    """Equal-width bin edges of ``|joint speed|`` from 0 to its maximum while moving,
+    inside the evaluation windows of ``signals``."""
+    speed = np.concatenate([np.abs(s.sim.joint_velocity) for s in signals])
+    inside = np.concatenate([np.asarray(s.sim.eval_mask, bool) for s in signals])
+    moving = np.concatenate([np.asarray(s.sim.moving, bool) for s in signals])
+    top = speed[inside & moving].max() if (inside & moving).any() else 1.0
+    return np.linspace(0.0, top, n_bins + 1)
+
+
+def error_by_speed(signals, n_bins: int = 12, edges=None) -> dict:
     """RMS error against ``torque_true`` per bin of joint speed, pooled over scenarios.
 
     Samples inside each scenario's evaluation window; bin 0 holds the samples at rest
-    (commanded speed zero), the others equal widths of ``|joint speed|`` up to its maximum.
+    (commanded speed zero), the others equal widths of ``|joint speed|`` up to its maximum
+    (or the given ``edges``, so that several devices share the bins).
     Returns ``{"speed": bin centres [rad/s], method: RMS per bin [Nm] (NaN if empty)}``.
     """
     speeds, mask_all = [], []
@@ -335,7 +350,8 @@ def error_by_speed(signals, n_bins: int = 12) -> dict:
     speed = np.concatenate(speeds)
     inside = np.concatenate(mask_all)
     moving = np.concatenate([np.asarray(s.sim.moving, bool) for s in signals])
-    edges = np.linspace(0.0, speed[inside & moving].max() if (inside & moving).any() else 1.0, n_bins + 1)
+    edges = speed_edges(signals, n_bins) if edges is None else np.asarray(edges, float)
+    n_bins = len(edges) - 1
     which = np.where(moving, np.clip(np.digitize(speed, edges[1:-1]) + 1, 1, n_bins), 0)
     out = {"speed": np.concatenate([[0.0], 0.5 * (edges[:-1] + edges[1:])])}
     methods = set.intersection(*(set(s.estimates) for s in signals)) if signals else set()
@@ -350,22 +366,133 @@ def error_by_speed(signals, n_bins: int = 12) -> dict:
     return out
 
 
-def plot_error_vs_speed(signals, out_png, seed: int = 0) -> Path:
-    """RMS error against joint speed per method (:func:`error_by_speed`), log scale."""
-    from rippleb.report import method_order
+def error_by_speed_over_seeds(tables) -> dict:
+    """Mean and 95 % t-interval over devices of per-seed :func:`error_by_speed` tables
+    (computed on shared bin edges).
 
+    Returns
+    -------
+    dict
+        ``{"speed": bin centres, "n": seeds, method: (mean, half) arrays per bin}``.
+    """
+    from rippleb.stats import t_interval
+
+    out = {"speed": tables[0]["speed"], "n": len(tables)}
+    methods = set.intersection(*(set(t) - {"speed"} for t in tables))
+    for name in methods:
+        per_seed = np.array([t[name] for t in tables])
+        cells = [t_interval(per_seed[:, b]) for b in range(per_seed.shape[1])]
+        out[name] = (np.array([c[0] for c in cells]), np.array([c[1] for c in cells]))
+    return out
+
+
+def plot_error_vs_speed(tables, out_png, seeds_text: str = "seed 0") -> Path:
+    """RMS error against joint speed per method, log scale: the mean over devices of each
+    device's RMS per speed bin, with its 95 % t-interval as a band
+    (:func:`error_by_speed_over_seeds`). ``tables`` is that function's result, or a list
+    of :class:`ScenarioSignals` of one device."""
+    from rippleb.stats import method_order
+
+    if isinstance(tables, list):
+        tables = error_by_speed_over_seeds([error_by_speed(tables)])
     plt = _pyplot()
-    table = error_by_speed(signals)
     fig, ax = plt.subplots(figsize=(9, 5.5))
-    names = method_order(k for k in table if k != "speed")
+    names = method_order(k for k in tables if k not in ("speed", "n"))
     for i, name in enumerate(names):
-        ax.plot(table["speed"], table[name], marker="o", ms=3.5, lw=1.2, **style(name, i))
+        mean, half = tables[name]
+        kw = style(name, i)
+        ax.plot(tables["speed"], mean, marker="o", ms=3.5, lw=1.2, **kw)
+        if np.isfinite(half).any():
+            ax.fill_between(tables["speed"], np.maximum(mean - half, 1e-6), mean + half,
+                            color=kw["color"], alpha=0.15, lw=0)
     ax.set_yscale("log")
-    scen = ", ".join(s.sim.log.meta.get("scenario", "?") for s in signals)
     ax.set(xlabel="|joint speed| [rad/s] (0: at rest)", ylabel="RMS error against torque_true [Nm]",
-           title=f"Error against joint speed, pooled over {scen}; device seed {seed}")
+           title=f"Error against joint speed, pooled over {', '.join(SIGNAL_SCENARIOS)}: mean over "
+                 f"{seeds_text}\n(band: 95 % t-interval over devices)")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8, ncols=2)
+    fig.tight_layout()
+    return _save(fig, out_png)
+
+
+def residual_spectra(sig: ScenarioSignals, max_order: float = 10.0, max_freq: float = 200.0) -> dict:
+    """Amplitude spectra of each method's error ``estimate - torque_true`` over the
+    evaluation window: over frequency, and over wave-generator order after re-sampling at
+    encoder positions on the longest stretch of motion in one direction.
+
+    Returns
+    -------
+    dict
+        ``{"freq": [Hz], "order": [1/rev], method: (amp_over_freq, amp_over_order)}`` [Nm];
+        ``order`` is empty if the scenario has no stretch of at least two revolutions.
+    """
+    log = sig.sim.log
+    mask = np.asarray(sig.sim.eval_mask, bool)
+    first, last = np.flatnonzero(mask)[[0, -1]]
+    window = slice(first, last + 1)
+    n = last + 1 - first
+    freq = np.fft.rfftfreq(n, 1.0 / log.spec.fs)
+    grid, cpr = _order_grid(log.encoder[window], log.spec.counts_per_rev)
+    order = np.fft.rfftfreq(len(grid[1]), 1.0 / cpr) if grid is not None else np.array([])
+    out = {"freq": freq[freq <= max_freq], "order": order[order <= max_order]}
+    for name, est in sig.estimates.items():
+        err = (est - log.torque_true)[window]
+        amp_f = _amplitude(err)[freq <= max_freq]
+        if grid is not None:
+            edge, revs_grid = grid
+            amp_o = _amplitude(np.interp(revs_grid, edge[1], err[edge[0]]))[order <= max_order]
+        else:
+            amp_o = np.array([])
+        out[name] = (amp_f, amp_o)
+    return out
+
+
+def _order_grid(counts, cpr):
+    """Sample indices and motor revolutions of the encoder edges on the longest monotonic
+    stretch, and a uniform grid of whole revolutions over it; None if under two revolutions."""
+    edge = np.flatnonzero(np.diff(counts)) + 1
+    if len(edge) < 2:
+        return None, cpr
+    step = np.sign(np.diff(counts[edge]))
+    breaks = np.flatnonzero(np.diff(step)) + 1
+    runs = np.split(np.arange(len(edge)), breaks + 1) if len(breaks) else [np.arange(len(edge))]
+    best = max(runs, key=len)
+    idx = edge[best]
+    revs = counts[idx] / cpr * (1 if step[min(best[0], len(step) - 1)] > 0 else -1)
+    whole = int(np.floor(revs[-1] - revs[0]))
+    if whole < 2:
+        return None, cpr
+    return ((idx, revs), revs[0] + np.arange(whole * cpr) / cpr), cpr
+
+
+def plot_residual_spectra(sig: ScenarioSignals, out_png, seed: int = 0) -> Path:
+    """What each method leaves behind: amplitude spectrum of its error against
+    ``torque_true`` over wave-generator order (left; ripple sits at orders 2, 4, 8) and
+    over frequency (right), one line per method, log scale."""
+    from rippleb.stats import method_order
+
+    plt = _pyplot()
+    spectra = residual_spectra(sig)
+    names = method_order(k for k in spectra if k not in ("freq", "order"))
+    fig, (ax_o, ax_f) = plt.subplots(1, 2, figsize=(12, 5))
+    for i, name in enumerate(names):
+        amp_f, amp_o = spectra[name]
+        kw = style(name, i)
+        if len(amp_o):
+            ax_o.plot(spectra["order"][1:], amp_o[1:], lw=0.9, **kw)
+        ax_f.plot(spectra["freq"][1:], amp_f[1:], lw=0.9, **kw)
+    for k in (2, 4, 8):
+        ax_o.axvline(k, color="k", lw=0.6, ls=":", label="ripple orders 2, 4, 8" if k == 2 else None)
+    scenario = sig.sim.log.meta.get("scenario", "?")
+    ax_o.set(xlabel="order [per wave-generator revolution]", ylabel="error amplitude [Nm]", yscale="log",
+             title="(a) over angle: ripple left behind" if len(spectra["order"]) else
+             "(a) over angle: no stretch of two revolutions in one direction")
+    ax_f.set(xlabel="frequency [Hz]", yscale="log", title="(b) over time: noise, lag and drift left behind")
+    for a in (ax_o, ax_f):
+        a.grid(alpha=0.3, which="both")
+    ax_o.legend(fontsize=7, ncols=2)
+    fig.suptitle(f"Spectrum of each method's error against torque_true on {scenario}, device seed {seed}",
+                 fontsize=10)
     fig.tight_layout()
     return _save(fig, out_png)
 
@@ -386,7 +513,7 @@ def plot_restart_zoom(sig: ScenarioSignals, out_png, seed: int = 0,
                       before_s: float = 0.15, after_s: float = 0.35) -> Path | None:
     """Zoom on the restart after the longest rest of ``stop-restart``: estimates (top) and
     their error (bottom); this is where the dead zone and back propagation act."""
-    from rippleb.report import method_order
+    from rippleb.stats import method_order
 
     i = longest_rest_restart(sig)
     if i is None:
@@ -417,7 +544,7 @@ def plot_accuracy_vs_cost(frame, out_png) -> Path:
     """Accuracy against per-tick cost, from the rows: per method, ``rms_error_nm`` averaged
     over scenarios for each seed (point: mean over seeds, bar: 95 % t-interval) against the
     median over rows of ``us_per_tick_p99`` (bar: 25th to 75th percentile)."""
-    from rippleb.report import method_order, t_interval
+    from rippleb.stats import method_order, t_interval
 
     plt = _pyplot()
     ok = frame[frame["status"] == "ok"]
@@ -452,11 +579,18 @@ def plot_accuracy_vs_cost(frame, out_png) -> Path:
     return _save(fig, out_png)
 
 
-def draw_all(frame, out_dir, seed: int = 0) -> tuple[dict, list]:
-    """Every figure the run allows, into ``out_dir``.
+FORMATS = ("png", "svg", "pdf")
 
-    Signal figures use the run's methods with at least one ok row, on the scenarios of
-    :data:`SIGNAL_SCENARIOS` that the run scored, re-simulated on ``seed``.
+
+def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
+             keep: dict | None = None) -> tuple[dict, list]:
+    """Every figure the run allows, into ``out_dir``, as ``fmt`` (png, svg or pdf).
+
+    Signal figures use the run's methods with at least one ok row of the ``same-session``
+    condition, on the scenarios of :data:`SIGNAL_SCENARIOS` that the run scored,
+    re-simulated on ``seed``; the error-against-speed figure repeats that on every seed of
+    ``speed_seeds`` (default: every seed of the run) to show the mean over devices.
+    ``keep``, if given, receives the signals of ``seed`` per scenario (for the HTML page).
 
     Returns
     -------
@@ -464,46 +598,76 @@ def draw_all(frame, out_dir, seed: int = 0) -> tuple[dict, list]:
         ``{name: (path, caption)}`` in README order, and one line per method or figure
         that could not be drawn.
     """
-    from rippleb.report import method_order
+    from rippleb.conditions import DEFAULT_CONDITION
+    from rippleb.provenance import seeds_text
+    from rippleb.stats import method_order, with_condition
 
+    if fmt not in FORMATS:
+        from rippleb.errors import InputError
+
+        raise InputError(f"--format {fmt}: choose one of {', '.join(FORMATS)}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    path = lambda name: out_dir / f"{name}.{fmt}"  # noqa: E731
     figures, warnings = {}, []
-    figures["fig2_order_spectra"] = (plot_order_spectra(out_dir / "fig2_order_spectra.png", seed=seed),
+    figures["fig2_order_spectra"] = (plot_order_spectra(path("fig2_order_spectra"), seed=seed),
                                      f"Strain spectra over time and over angle (Fig. 2 replica, seed {seed})")
-    ok = frame[frame["status"] == "ok"]
+    frame = with_condition(frame)
+    ok = frame[(frame["status"] == "ok") & (frame["condition"] == DEFAULT_CONDITION)]
     methods = method_order(ok["method"].unique())
     scenarios = [s for s in SIGNAL_SCENARIOS if s in set(ok["scenario"])]
     signals = {}
     if methods and scenarios:
-        fitted, errors = fit_methods(methods, seed)
-        warnings += [f"figures: {m} not drawn, fit failed: {e}" for m, e in errors.items()]
+        signals, more = _signals_of_seed(methods, scenarios, seed)
+        warnings += more
         for scenario in scenarios:
-            signals[scenario] = stream_methods(fitted, scenario, seed)
-            warnings += [f"figures: {m} not drawn on {scenario}: {e}"
-                         for m, e in signals[scenario].errors.items()]
             warnings += _check_against_rows(signals[scenario], ok, scenario, seed)
+        if keep is not None:
+            keep.update(signals)
     if "paper-quintic" in signals:
         sig = signals["paper-quintic"]
-        figures["fig4_trajectory"] = (plot_trajectory(sig, out_dir / "fig4_trajectory.png"),
+        figures["fig4_trajectory"] = (plot_trajectory(sig, path("fig4_trajectory")),
                                       "Trajectory of paper-quintic (Fig. 4 replica)")
         figures["fig5_ripple_compensation"] = (
-            plot_ripple_compensation(sig, out_dir / "fig5_ripple_compensation.png", seed),
+            plot_ripple_compensation(sig, path("fig5_ripple_compensation"), seed),
             f"Raw against order-tracking filtered torque on paper-quintic (Fig. 5 replica, seed {seed})")
         figures["fig6_estimates"] = (
-            plot_estimates(sig, out_dir / "fig6_estimates.png", seed),
+            plot_estimates(sig, path("fig6_estimates"), seed),
             f"Each estimate against the model reference on paper-quintic (Fig. 6 replica, seed {seed})")
     if signals:
+        seeds = sorted(int(k) for k in (ok["seed"].unique() if speed_seeds is None else speed_seeds))
+        edges = speed_edges(list(signals.values()))
+        tables = [error_by_speed(list(signals.values()), edges=edges)]
+        for other in (k for k in seeds if k != seed):
+            more_signals, _ = _signals_of_seed(methods, scenarios, other)
+            tables.append(error_by_speed(list(more_signals.values()), edges=edges))
+        text = seeds_text(sorted(set(seeds) | {seed})).replace("(", "devices (")
         figures["error_vs_speed"] = (
-            plot_error_vs_speed(list(signals.values()), out_dir / "error_vs_speed.png", seed),
-            f"RMS error against joint speed per method (seed {seed})")
+            plot_error_vs_speed(error_by_speed_over_seeds(tables), path("error_vs_speed"), text),
+            f"RMS error against joint speed per method, mean over {text}")
+        spectral = next((signals[s] for s in ("speed-sweep", "paper-quintic", "stop-restart") if s in signals))
+        figures["residual_spectra"] = (
+            plot_residual_spectra(spectral, path("residual_spectra"), seed),
+            f"What each method leaves behind: spectrum of its error over order and over frequency (seed {seed})")
     if "stop-restart" in signals:
-        path = plot_restart_zoom(signals["stop-restart"], out_dir / "restart_zoom.png", seed)
-        if path is not None:
-            figures["restart_zoom"] = (path, f"Zoom on a restart of stop-restart (seed {seed})")
-    figures["accuracy_vs_cost"] = (plot_accuracy_vs_cost(frame, out_dir / "accuracy_vs_cost.png"),
-                                   "Accuracy against per-tick cost, from the rows")
+        zoom = plot_restart_zoom(signals["stop-restart"], path("restart_zoom"), seed)
+        if zoom is not None:
+            figures["restart_zoom"] = (zoom, f"Zoom on a restart of stop-restart (seed {seed})")
+    figures["accuracy_vs_cost"] = (plot_accuracy_vs_cost(ok, path("accuracy_vs_cost")),
+                                   "Accuracy against per-tick cost, from the rows (same-session)")
     return figures, warnings
+
+
+def _signals_of_seed(methods, scenarios, seed: int) -> tuple[dict, list]:
+    """Fit ``methods`` on the calibration log of ``seed`` and stream each scenario."""
+    fitted, errors = fit_methods(methods, seed)
+    warnings = [f"figures: {m} not drawn on seed {seed}, fit failed: {e}" for m, e in errors.items()]
+    signals = {}
+    for scenario in scenarios:
+        signals[scenario] = stream_methods(fitted, scenario, seed)
+        warnings += [f"figures: {m} not drawn on {scenario} seed {seed}: {e}"
+                     for m, e in signals[scenario].errors.items()]
+    return signals, warnings
 
 
 def _check_against_rows(sig: ScenarioSignals, ok, scenario: str, seed: int) -> list[str]:

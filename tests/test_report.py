@@ -127,7 +127,7 @@ def test_failed_rows_are_listed_and_left_out_of_the_means():
              "status": "timeout", "message": "killed after 300 s"}]
     text = report.tables_markdown(_frame(rows))
     assert "1 of 2 rows did not finish ok" in text
-    assert "| raw      | creep      | 1      | timeout  | killed after 300 s |" in text
+    assert "| raw      | creep      | same-session | 1      | timeout  | killed after 300 s |" in text
     assert "500" not in report.matrix_markdown(_frame(rows), "rms_error_nm")
 
 

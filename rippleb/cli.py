@@ -58,9 +58,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_list(sub) -> None:
-    p = sub.add_parser("list", help="list methods (built-in, plugin, broken) and scenarios",
+    p = sub.add_parser("list", help="list methods, scenarios and deployment conditions, one line each",
                        description="List every method with its origin (builtin, plugin, or broken "
-                                   "with its import error) and every built-in scenario.")
+                                   "with its import error) and what it does (the first line of its "
+                                   "docstring), every built-in scenario with whether it is scored and "
+                                   "what it tests (the first sentence of its description), and the "
+                                   "deployment conditions.")
     p.set_defaults(func=cmd_list)
 
 
@@ -112,7 +115,7 @@ def _add_simulate(sub) -> None:
 def _add_report(sub) -> None:
     p = sub.add_parser("report", help="write the report of a run (tables, figures, provenance; --html)",
                        description="From DIR/results.csv write OUT/README.md (method x condition summary "
-                                   "and headline; per condition the method x scenario matrices with 95 %% "
+                                   "and headline; per condition the method x scenario matrices with 95 % "
                                    "confidence intervals over seeds, timing, ranking, the paper's "
                                    "Table I replica; failed rows; provenance), OUT/results.csv, "
                                    "OUT/provenance.json, OUT/figures/ and, with --html, OUT/index.html. "
@@ -135,8 +138,13 @@ def _add_report(sub) -> None:
     p.set_defaults(func=cmd_report)
 
 
+#: ``rippleb list`` fits a terminal this wide; longer descriptions wrap.
+LIST_WIDTH = 100
+
+
 def cmd_list(args) -> int:
     """``rippleb list``."""
+    from rippleb.conditions import CONDITIONS
     from rippleb.registry import Registry
     from rippleb.scenario import builtin_scenarios, load_scenario
 
@@ -145,19 +153,56 @@ def cmd_list(args) -> int:
     print("methods:")
     for name in registry.names():
         entry = registry.entries[name]
-        origin = "broken" if entry.broken else entry.origin
-        extra = f"  {entry.error}" if entry.broken else ""
-        print(f"  {name:<28} {origin:<8} {entry.source}{extra}")
+        if entry.broken:
+            print(f"  {name:<28} {'broken':<8} {entry.source}  {entry.error}")
+            continue
+        print(_fit(f"  {name:<28} {entry.origin:<10} {first_line(entry.load().__doc__) or entry.source}"))
     for module, error in sorted(registry.broken_modules.items()):
         print(f"  {'?':<28} {'broken':<8} {module}  {error}")
     print("scenarios:")
     for name in builtin_scenarios():
         try:
-            scored = "scored" if load_scenario(name).scored else "not scored"
+            scenario = load_scenario(name)
         except RipplebError as exc:
-            scored = f"broken  {exc}"
-        print(f"  {name:<28} {scored}")
+            print(f"  {name:<28} broken      {exc}")
+            continue
+        scored = "scored" if scenario.scored else "not scored"
+        print(_fit(f"  {name:<28} {scored:<10} {first_sentence(scenario.description)}"))
+    print("conditions (what happened between calibration and scoring):")
+    for name, text in CONDITIONS.items():
+        print(_fit(f"  {name:<28} {'':<10} {text}"))
     return 0
+
+
+def first_line(doc: str | None) -> str:
+    """The first non-empty line of a docstring, without reST markup."""
+    lines = [line.strip() for line in (doc or "").strip().splitlines() if line.strip()]
+    return lines[0].replace("``", "") if lines else ""
+
+
+#: Words ending in a full stop that do not end a sentence.
+_ABBREVIATIONS = ("Fig", "Figs", "Sec", "Eq", "e.g", "i.e", "al", "approx", "cf")
+
+
+def first_sentence(text: str) -> str:
+    """The first sentence of ``text`` on one line (a full stop after an abbreviation such
+    as "Fig." does not end it)."""
+    import re
+
+    flat = " ".join(text.split())
+    for match in re.finditer(r"\.\s", flat):
+        word = flat[: match.start()].rsplit(" ", 1)[-1]
+        if word not in _ABBREVIATIONS:
+            return flat[: match.start() + 1]
+    return flat
+
+
+def _fit(line: str) -> str:
+    """``line`` wrapped at :data:`LIST_WIDTH`, continuation lines under the description."""
+    import textwrap
+
+    indent = " " * 42  # under the description: 2 + 28 + 1 + 10 + 1
+    return textwrap.fill(line, LIST_WIDTH, subsequent_indent=indent, break_on_hyphens=False)
 
 
 def cmd_run(args) -> int:

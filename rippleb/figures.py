@@ -386,29 +386,37 @@ def error_by_speed_over_seeds(tables) -> dict:
     return out
 
 
-def plot_error_vs_speed(tables, out_png, seeds_text: str = "seed 0") -> Path:
+def plot_error_vs_speed(tables, out_png, seeds_text: str = "seed 0", scenarios=None) -> Path:
     """RMS error against joint speed per method, log scale: the mean over devices of each
-    device's RMS per speed bin, with its 95 % t-interval as a band
+    device's RMS per speed bin, with its 95 % t-interval as an error bar
     (:func:`error_by_speed_over_seeds`). ``tables`` is that function's result, or a list
-    of :class:`ScenarioSignals` of one device."""
+    of :class:`ScenarioSignals` of one device. A bar whose lower end is at or below zero
+    runs off the bottom of the (log) axis, which is set by the means."""
     from rippleb.stats import method_order
 
     if isinstance(tables, list):
+        scenarios = scenarios or [s.sim.log.meta.get("scenario", "?") for s in tables]
         tables = error_by_speed_over_seeds([error_by_speed(tables)])
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(9, 5.5))
     names = method_order(k for k in tables if k not in ("speed", "n"))
+    width = np.diff(tables["speed"][1:3])[0] if len(tables["speed"]) > 2 else 1.0
+    lows, highs = [], []
     for i, name in enumerate(names):
         mean, half = tables[name]
         kw = style(name, i)
-        ax.plot(tables["speed"], mean, marker="o", ms=3.5, lw=1.2, **kw)
-        if np.isfinite(half).any():
-            ax.fill_between(tables["speed"], np.maximum(mean - half, 1e-6), mean + half,
-                            color=kw["color"], alpha=0.15, lw=0)
+        shift = (i - (len(names) - 1) / 2) * 0.6 * width / max(len(names), 1)  # bars side by side
+        bars = np.where(np.isfinite(half), half, 0.0)
+        ax.errorbar(tables["speed"] + shift, mean, yerr=bars, marker="o", ms=3.5, lw=1.2, capsize=2, **kw)
+        lows.append(np.nanmin(mean))
+        highs.append(np.nanmax(mean + bars))
+    if lows:
+        ax.set_ylim(max(min(lows) / 5.0, 1e-9), max(highs) * 1.5)
     ax.set_yscale("log")
+    where = ", ".join(scenarios) if scenarios else "the signal scenarios"
     ax.set(xlabel="|joint speed| [rad/s] (0: at rest)", ylabel="RMS error against torque_true [Nm]",
-           title=f"Error against joint speed, pooled over {', '.join(SIGNAL_SCENARIOS)}: mean over "
-                 f"{seeds_text}\n(band: 95 % t-interval over devices)")
+           title=f"Error against joint speed, pooled over {where}\nmean over {seeds_text} "
+                 f"(bar: 95 % t-interval over devices)")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8, ncols=2)
     fig.tight_layout()
@@ -643,7 +651,7 @@ def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
             tables.append(error_by_speed(list(more_signals.values()), edges=edges))
         text = seeds_text(sorted(set(seeds) | {seed})).replace("(", "devices (")
         figures["error_vs_speed"] = (
-            plot_error_vs_speed(error_by_speed_over_seeds(tables), path("error_vs_speed"), text),
+            plot_error_vs_speed(error_by_speed_over_seeds(tables), path("error_vs_speed"), text, scenarios),
             f"RMS error against joint speed per method, mean over {text}")
         spectral = next((signals[s] for s in ("speed-sweep", "paper-quintic", "stop-restart") if s in signals))
         figures["residual_spectra"] = (

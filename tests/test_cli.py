@@ -24,11 +24,21 @@ def test_help_of_every_command():
         assert proc.returncode == 0 and "usage: rippleb" in proc.stdout
 
 
+def test_report_help_prints_percent_signs_once():
+    proc = rippleb("report", "--help")
+    assert "95 % confidence" in proc.stdout and "%%" not in proc.stdout
+
+
 def test_list_shows_methods_and_scenarios():
     proc = rippleb("list")
     assert proc.returncode == 0
     assert "raw" in proc.stdout and "builtin" in proc.stdout
     assert "paper-quintic" in proc.stdout and "calibration                  not scored" in proc.stdout
+    # one description per method (its docstring) and scenario (its TOML description)
+    assert "Order tracking with dead-zone switching and back" in proc.stdout
+    assert "The paper's Fig. 4 experiment: one 5th-order polynomial" in proc.stdout
+    assert "re-assembled" in proc.stdout
+    assert max(len(line) for line in proc.stdout.splitlines()) <= 100
 
 
 @pytest.mark.parametrize("args, message", [

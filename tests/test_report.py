@@ -248,14 +248,16 @@ def test_report_through_the_cli_on_a_tiny_run(tmp_path, capsys):
     assert (pub / "results.csv").read_bytes() == (run_dir / "results.csv").read_bytes()
     frame = report.read_results_exact(pub / "results.csv")
     assert report.tables_markdown(frame) in readme
-    assert "4 rows: 2 methods x 1 scenarios x 2 seeds (4 ok)" in readme
+    assert "4 rows: 2 methods x 1 scenarios x 1 condition x 2 seeds (4 ok)" in readme
+    assert readme.startswith("# rippleb report of `")  # a trial report, not the published one
     assert "Not available" in readme  # no current-based/order-tracking in this run
+    assert "mean over 0-1 devices (2 seeds)" in readme  # error against speed over every seed
     assert f"`rippleb {' '.join(run_args)}`" in readme
     prov = json.loads((pub / "provenance.json").read_text())
     assert prov["seeds"] == [0, 1] and prov["figure_seed"] == 1
     assert prov["run"]["command"] == recorded["command"]
     for name in ("fig2_order_spectra", "fig4_trajectory", "fig5_ripple_compensation", "fig6_estimates", "error_vs_speed",
-                 "accuracy_vs_cost"):
+                 "residual_spectra", "accuracy_vs_cost"):
         assert f"figures/{name}.png" in readme
         assert _is_png(pub / "figures" / f"{name}.png")
     assert "warning" not in capsys.readouterr().err  # figure signals reproduce the rows of seed 1

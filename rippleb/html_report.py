@@ -67,8 +67,8 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
         ``{scenario: ScenarioSignals}`` already streamed for ``figure_seed`` (saves
         re-simulating them).
     """
-    from rippleb.report import _title, _counts_sentence, is_recorded
-    from rippleb.tables import condition_headline, condition_summary_markdown
+    from rippleb.tables import (condition_headline, condition_summary_markdown, counts_sentence, is_recorded,
+                                title_lines)
 
     frame = with_condition(frame)
     figures = [_rows_figure(frame), _cost_figure(frame)]
@@ -78,9 +78,9 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
     divs = [fig.to_html(full_html=False, include_plotlyjs=(i == 0), div_id=f"figure-{i}",
                         config={"responsive": True, "displaylogo": False})
             for i, fig in enumerate(figures)]
-    title = _title(prov.get("published", False), is_recorded(frame), str(prov.get("run_dir", "DIR")))
+    title = title_lines(prov.get("published", False), is_recorded(frame), str(prov.get("run_dir", "DIR")))
     body = [f"<h1>{_md(title[0].lstrip('# '))}</h1>", f"<p>{_md(title[2])}</p>",
-            f"<p>{_md(_counts_sentence(frame, is_recorded(frame)))}</p>",
+            f"<p>{_md(counts_sentence(frame, is_recorded(frame)))}</p>",
             '<ul id="page-errors"></ul>',
             "<h2>Method x condition: mean RMS error over the scenarios [Nm]</h2>",
             _markdown_table(condition_summary_markdown(frame)),

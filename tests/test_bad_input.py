@@ -219,6 +219,7 @@ def _case_names():
         return list(_setup(Path(tmp)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", _case_names())
 def test_bad_input_is_one_line_exit_2(outcomes, case):
     _, cases, procs, _ = outcomes
@@ -293,6 +294,7 @@ def test_scenario_and_log_readers_use_no_code_loaders():
     assert "allow_pickle=False" in (root / "runner.py").read_text()
 
 
+@pytest.mark.slow
 def test_names_cannot_make_the_runner_write_outside_out(tmp_path):
     """A plugin named ``../../escape`` and a scenario file named ``..x.toml``: every file the
     run writes stays under ``--out``."""

@@ -63,6 +63,7 @@ def test_debug_shows_the_traceback(tmp_path):
     assert proc.returncode != 0 and "Traceback" in proc.stderr
 
 
+@pytest.mark.slow
 def test_simulate_run_and_report(tmp_path):
     log = tmp_path / "log.parquet"
     assert rippleb("simulate", "static-contact", "--seed", "1", "--out", log).returncode == 0

@@ -149,6 +149,7 @@ def fault_rows(tmp_path_factory):
     return rippleb.run(methods=None, scenarios=[str(p) for p in paths], seeds=[0], jobs=2)
 
 
+@pytest.mark.slow
 def test_every_builtin_method_survives_every_fault(fault_rows):
     from rippleb.registry import Registry
 

@@ -135,6 +135,7 @@ def fake(monkeypatch):
     monkeypatch.setattr(Registry, "discover", classmethod(lambda cls, group="rippleb.methods": discover(group)))
 
 
+@pytest.mark.slow
 def test_misbehaving_methods_get_their_status_and_the_others_complete(fake, tmp_path):
     names = [c.name for c in ALL] + ["raw"]
     frame = rippleb.run(methods=names, scenarios=["paper-quintic"], seeds=2, jobs=3, out=tmp_path,
@@ -200,6 +201,7 @@ def test_resume_runs_only_the_missing_rows(fake, tmp_path):
     assert both.set_index("method").loc["raw", "run_id"] == first.loc[0, "run_id"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 def test_interrupt_keeps_the_finished_rows(fake, tmp_path, signum):
     # The signal arrives while 'sleeps' blocks the run; the rows before it are on disk.

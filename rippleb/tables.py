@@ -8,6 +8,8 @@ a deployment ``condition`` (:mod:`rippleb.conditions`); rows without one are
 
 from __future__ import annotations
 
+import textwrap
+
 import numpy as np
 
 from rippleb.stats import (condition_order, fmt_interval, interval_frame, method_order,
@@ -53,6 +55,11 @@ def markdown(rows, headers) -> str:
 
 def plural(n: int, word: str) -> str:
     return f"{n} {word}{'' if n == 1 else 's'}"
+
+
+def _first_line(message) -> str:
+    text = "" if message is None or (isinstance(message, float) and np.isnan(message)) else str(message)
+    return text.splitlines()[0] if text.strip() else "(no message)"
 
 
 def one_line(message) -> str:
@@ -388,7 +395,9 @@ def summary_text(frame) -> str:
     failed = with_condition(frame)
     failed = failed[failed["status"] != "ok"]
     if len(failed):
-        parts += ["", "Rows that did not finish ok (full messages in results.csv):", ""]
-        parts += [f"- {r.method} / {r.scenario} / {r.condition} / seed {r.seed}: {r.status}: "
-                  f"{one_line(r.message)}"[:SUMMARY_WIDTH] for r in failed.itertuples()]
+        parts += ["", "Rows that did not finish ok:", ""]
+        for r in failed.itertuples():
+            parts.append(f"- {r.method} / {r.scenario} / {r.condition} / seed {r.seed}: {r.status}"[:SUMMARY_WIDTH])
+            parts.append(textwrap.fill(_first_line(r.message), SUMMARY_WIDTH, initial_indent="    ",
+                                       subsequent_indent="    ", break_on_hyphens=False))
     return "\n".join(parts)

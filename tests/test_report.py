@@ -348,6 +348,7 @@ def test_closing_table_of_run_fits_100_columns_with_the_longest_names():
     rows.append({**rows[0], "seed": 9, "status": "timeout", "message": "killed after 300 s " * 10})
     text = tables.summary_text(_frame(rows))
     assert max(len(line) for line in text.splitlines()) <= 100
+    assert text.count("killed") == 10  # a failed row's message is wrapped, not cut
     assert "0.13 ± 0.025" in text and "Mean ± 95 % interval" in text  # means with intervals, as the report
 
 

@@ -102,7 +102,10 @@ def test_sigint_then_resume(tmp_path):
     args = [sys.executable, "-m", "rippleb", "run", "--methods", "raw,lowpass", "--scenarios",
             "paper-quintic,creep,reversal", "--seeds", "3", "--jobs", "1", "--out", str(out),
             "--no-progress"]
-    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # Ctrl-C as in a terminal: a child of a background process (a pytest-xdist worker)
+    # inherits SIGINT ignored, and Python keeps it ignored.
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:   # interrupt once some, not all, rows are done
         if (out / "results.csv").is_file() and len(pd.read_csv(out / "results.csv")) >= 2:

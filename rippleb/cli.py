@@ -95,8 +95,8 @@ def _add_run(sub) -> None:
     p.add_argument("--log", type=Path, help="run on a recorded log (.csv or .parquet) instead of scenarios")
     p.add_argument("--calibration", type=Path,
                    help="with --log: the calibration log (needs torque_ref); default: the log itself, "
-                        "with a warning: a scored log is not a calibration recording, so some methods "
-                        "fit worse on it and others better, and the rows compare no method fairly")
+                        "with a warning: a scored log is not a calibration recording, and fits some "
+                        "methods worse or not at all")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_run)
 
@@ -258,11 +258,11 @@ def _run(args, start: float) -> int:
         frame = runner.run_log(args.log, args.calibration, args.methods, jobs=args.jobs,
                                out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress)
         if args.calibration is None:
-            print("rippleb: warning: no --calibration: methods were fitted on the scored log itself, "
-                  "which is not a calibration recording (a method that needs motion both ways or "
-                  "several speeds may fit worse, or fail; one that fits the ripple may fit better "
-                  "than it could on new data); pass --calibration FILE, e.g. from "
-                  "'rippleb simulate calibration'", file=sys.stderr)
+            print("rippleb: warning: no --calibration: each method was fitted on the scored log "
+                  "itself, not on a calibration recording; a log without motion both ways, a range "
+                  "of speeds and known loads fits some methods worse than a calibration recording "
+                  "would, or not at all, so these rows are no fair comparison; pass --calibration "
+                  "FILE, e.g. one written by 'rippleb simulate calibration'", file=sys.stderr)
     elif args.resume is not None:
         config = runner.read_config(args.resume)
         args.out_dir = args.resume

@@ -7,6 +7,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -146,3 +147,16 @@ def test_non_editable_install_lists_builtins(tmp_path):
                                 "s = git_state(); print(s['git_commit'], s.get('git_source'))"],
                                capture_output=True, text=True, cwd=elsewhere, env=env).stdout.split()
         assert state == [head.stdout.strip(), "build"]
+
+
+def test_run_on_a_log_without_calibration_warns_what_is_true(tmp_path):
+    n = 4000
+    t = np.arange(n) / 20000.0
+    torque = 5.0 * np.sin(2 * np.pi * 3 * t)
+    pd.DataFrame({"t": t, "strain": 1e-3 * torque, "encoder": np.arange(n) // 4, "current": 0.01 * torque,
+                  "torque_ref": torque}).to_csv(tmp_path / "rec.csv", index=False)
+    proc = rippleb("run", "--log", tmp_path / "rec.csv", "--methods", "raw", "--jobs", "1", "--no-progress",
+                   "--out", tmp_path / "run", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "not on a calibration recording" in proc.stderr and "flatters" not in proc.stderr
+    assert proc.stdout.rstrip().splitlines()[-1].startswith(f"Next: rippleb report {tmp_path / 'run'}")

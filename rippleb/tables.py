@@ -194,16 +194,19 @@ def timing_note(prov: dict, frame) -> str:
     """How the timing columns were taken, from the run's provenance."""
     run = prov.get("run", {})
     jobs, cpus = run.get("jobs"), run.get("cpu_count")
-    how = (f"{jobs} rows ran in parallel on a machine with {cpus} CPUs" if jobs and cpus else
-           f"{jobs} rows ran in parallel (CPU count not recorded)" if jobs else
-           "the number of parallel rows was not recorded")
+    if not jobs:
+        how = "the number of rows run in parallel was not recorded"
+    else:
+        how = ("rows ran one at a time (`--jobs 1`)" if jobs == 1 else
+               f"{jobs} rows ran in parallel (`--jobs {jobs}`)")
+        how += f" on a machine with {cpus} CPUs" if cpus else " (CPU count not recorded)"
     noisy = int(timing_cells(frame)["noisy"].sum())
     advice = ("" if jobs == 1 else " For timings that are quiet by construction, re-run the "
               "methods of interest with `--jobs 1` on an idle machine and compare within that run.")
     return (f"Each `step` call is timed with `perf_counter_ns` inside the row's own process; "
             f"a cell is `p50 / p99` [us], the medians over seeds of each row's 50th and 99th "
             f"percentile. For this run {how}; {noisy} cells are flagged `noisy` (the p99 spreads "
-            f"over seeds by more than {NOISY_SPREAD:.0%} of its median, or exceeds {NOISY_TAIL:g} x "
+            f"over seeds by more than {100 * NOISY_SPREAD:g} % of its median, or exceeds {NOISY_TAIL:g} x "
             f"the p50: time spent descheduled, not computing). Compare methods within one run; "
             f"p50 is the robust figure.{advice}")
 

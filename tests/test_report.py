@@ -410,3 +410,14 @@ def test_dashed_motion_lines_are_labelled_in_figs_5_and_6(tmp_path):
     finally:
         plt.Figure.savefig = original
     assert all(figures.MOTION_EDGE_LABEL in labels for labels in seen) and len(seen) == 2
+
+
+def test_the_report_says_how_timing_was_taken():
+    rows = [{"method": "raw", "scenario": "creep", "seed": k, "us_per_tick_p50": 2.0, "us_per_tick_p99": 5.0}
+            for k in range(3)]
+    note = tables.timing_note({"run": {"jobs": 2, "cpu_count": 2}}, _frame(rows))
+    assert "2 rows ran in parallel (`--jobs 2`) on a machine with 2 CPUs; 0 cells are flagged" in note
+    assert "`--jobs 1`" in note  # how to get quiet timings
+    quiet = tables.timing_note({"run": {"jobs": 1, "cpu_count": 8}}, _frame(rows))
+    assert "rows ran one at a time (`--jobs 1`) on a machine with 8 CPUs" in quiet
+    assert "not recorded" in tables.timing_note({"run": {}}, _frame(rows))

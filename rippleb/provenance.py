@@ -79,7 +79,15 @@ def build_commit() -> dict | None:
     commit = getattr(_version, "__commit_id__", None)
     if not commit:
         return None
-    return {"commit": str(commit).removeprefix("g"), "dirty": ".d" in str(_version.__version__)}
+    return {"commit": str(commit).removeprefix("g"), "dirty": built_dirty(str(_version.__version__))}
+
+
+def built_dirty(version: str) -> bool:
+    """Whether setuptools-scm saw uncommitted changes: it then ends the local version with
+    the date, ``.dYYYYMMDD`` (``0.1.1.dev3+gabc1234.d20261122``)."""
+    import re
+
+    return re.search(r"\.d\d{8}$", version) is not None
 
 
 def _git(root: Path, *args: str) -> str:

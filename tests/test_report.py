@@ -421,3 +421,11 @@ def test_the_report_says_how_timing_was_taken():
     quiet = tables.timing_note({"run": {"jobs": 1, "cpu_count": 8}}, _frame(rows))
     assert "rows ran one at a time (`--jobs 1`) on a machine with 8 CPUs" in quiet
     assert "not recorded" in tables.timing_note({"run": {}}, _frame(rows))
+
+
+def test_a_dirty_build_is_told_from_a_dev_version():
+    from rippleb.provenance import built_dirty
+
+    assert not built_dirty("0.1.1.dev79+gf4de4a038")
+    assert built_dirty("0.1.1.dev79+gf4de4a038.d20261122")
+    assert not built_dirty("0.1.0")

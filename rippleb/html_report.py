@@ -150,7 +150,8 @@ def _markdown_table(text: str) -> str:
                 v = float(c.split(" ")[0])
             except ValueError:
                 v = ""
-            tds.append(f'<td class="{"text" if i == 0 else ""}" data-v="{v}">{html.escape(c)}</td>')
+            text = i == 0 or v == ""  # names and words left-aligned, numbers right
+            tds.append(f'<td class="{"text" if text else ""}" data-v="{v}">{html.escape(c)}</td>')
         rows.append("<tr>" + "".join(tds) + "</tr>")
     return f'<table class="sortable"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
 

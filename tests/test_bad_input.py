@@ -231,6 +231,7 @@ def test_bad_input_is_one_line_exit_2(outcomes, case):
         assert word in proc.stderr, proc.stderr
 
 
+@pytest.mark.slow
 def test_nothing_that_looks_like_a_result_is_written(outcomes):
     root, _, _, created = outcomes
     # no results.csv, no run directory, no log, and no file made by a payload

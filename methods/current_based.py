@@ -219,6 +219,13 @@ class CurrentBased(Method):
         speeds = np.geomspace(0.2, 50.0, 40)
         if moving.sum() < 10:
             raise ValueError("current-based: the calibration log has no motion to identify friction")
+        if not ((w[moving] > 0).any() and (w[moving] < 0).any()):
+            # Coulomb friction is sign(w) times a constant: in one direction it equals the
+            # current offset, and the least-squares problem has no unique solution.
+            raise ValueError("current-based: cannot identify friction: the calibration log turns the "
+                             "joint in one direction only, so Coulomb friction and the current offset "
+                             "cannot be told apart; calibrate on a log that moves both ways over a "
+                             "range of speeds (e.g. --calibration from 'rippleb simulate calibration')")
         # the motion estimates are band-limited to tens of Hz: a 2 kHz subsample holds
         # all their information and keeps the fit fast on long logs
         moving[np.arange(len(moving)) % 10 != 0] = False

@@ -11,7 +11,23 @@ from rippleb.runner import run, run_log
 from rippleb.scenario import Scenario, builtin_scenarios, load_scenario, scored_scenarios
 from rippleb.simulator import Simulation, simulate
 
-__version__ = "0.1.0"
+
+def _installed_version() -> str:
+    """The version setuptools-scm recorded at build time (``rippleb/_version.py``, not in
+    git), else the installed distribution's, else ``unknown``."""
+    try:
+        from rippleb._version import __version__ as built
+    except ImportError:
+        from importlib import metadata
+
+        try:
+            return metadata.version("rippleb")
+        except metadata.PackageNotFoundError:
+            return "unknown"
+    return built
+
+
+__version__ = _installed_version()
 
 __all__ = [
     "CONDITIONS",

@@ -87,11 +87,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_list(sub) -> None:
-    p = sub.add_parser("list", help="list methods (built-in, plugin, broken), scenarios and conditions",
+    p = sub.add_parser("list", help="list methods, scenarios and deployment conditions, one line each",
                        description="List every method with its origin (builtin, plugin, or broken "
-                                   "with its import error), every built-in scenario and every "
-                                   "deployment condition. Plugins are imported in a child process, "
-                                   "each under a timeout.")
+                                   "with its import error) and what it does (the first line of its "
+                                   "docstring), every built-in scenario with whether it is scored and "
+                                   "what it tests (the first sentence of its description), and the "
+                                   "deployment conditions. Plugins are imported in a child "
+                                   "process, each under a timeout.")
     p.add_argument("--import-timeout", type=float, default=PLUGIN_IMPORT_TIMEOUT_S, metavar="S",
                    help=f"seconds a plugin may take to import (default {PLUGIN_IMPORT_TIMEOUT_S:g})")
     p.set_defaults(func=cmd_list)
@@ -130,7 +132,8 @@ def _add_run(sub) -> None:
     p.add_argument("--log", type=Path, help="run on a recorded log (.csv or .parquet) instead of scenarios")
     p.add_argument("--calibration", type=Path,
                    help="with --log: the calibration log (needs torque_ref); default: the log itself, "
-                        "with a warning, since fitting on the scored log flatters every method")
+                        "with a warning: a scored log is not a calibration recording, and fits some "
+                        "methods worse or not at all")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_run)
 
@@ -150,17 +153,33 @@ def _add_simulate(sub) -> None:
 
 
 def _add_report(sub) -> None:
-    p = sub.add_parser("report", help="write the published comparison of a run (tables, figures, provenance)",
-                       description="From DIR/results.csv write OUT/README.md (method x scenario matrix "
-                                   "with 95%% confidence intervals over seeds, ranking, the paper's "
-                                   "Table I replica, failed rows, provenance), OUT/results.csv, "
-                                   "OUT/provenance.json and OUT/figures/*.png. See docs/report.md.")
+    p = sub.add_parser("report", help="write the report of a run (tables, figures, provenance; --html)",
+                       description="From DIR/results.csv write OUT/README.md (method x condition summary "
+                                   "and headline; per condition the method x scenario matrices with 95 % "
+                                   "confidence intervals over seeds, timing, ranking, the paper's "
+                                   "Table I replica; failed rows; provenance), OUT/results.csv, "
+                                   "OUT/provenance.json, OUT/figures/ and, with --html, OUT/index.html. "
+                                   "See docs/report.md.")
     p.add_argument("dir", type=Path, metavar="DIR")
     p.add_argument("--out", type=Path, help="output directory (default DIR/report/; the published one is results/)")
     p.add_argument("--no-figures", action="store_true", help="tables and provenance only")
     p.add_argument("--figure-seed", type=int, default=0,
                    help="device seed re-simulated for the signal figures (default 0)")
+    p.add_argument("--speed-seeds", type=int, metavar="N",
+                   help="error-against-speed figure: mean over the first N seeds of the run "
+                        "(default: every seed; each one is re-simulated)")
+    p.add_argument("--format", choices=("png", "svg", "pdf"), default="png", help="figure format (default png)")
+    p.add_argument("--html", action="store_true",
+                   help="also write OUT/index.html: one self-contained interactive page (sortable "
+                        "tables, zoomable figures, provenance), opened without network")
+    p.add_argument("--published", action="store_true",
+                   help="title and caveats of the project's published comparison (results/, see "
+                        "docs/report.md); without it the report says it is the report of one run")
     p.set_defaults(func=cmd_report)
+
+
+#: ``rippleb list`` fits a terminal this wide; longer descriptions wrap.
+LIST_WIDTH = 100
 
 
 def cmd_list(args) -> int:
@@ -171,63 +190,100 @@ def cmd_list(args) -> int:
 
     registry = Registry.discover()
     timeout = _limit("--import-timeout", args.import_timeout) or None
-    errors = probe_plugins(registry, timeout)
+    errors, docs = probe_plugins(registry, timeout)
     print("methods:")
     for name in registry.names():
         entry = registry.entries[name]
         error = entry.error or errors.get(name)
-        origin = "broken" if error else entry.origin
-        extra = f"  {error}" if error else ""
-        print(f"  {name:<28} {origin:<8} {entry.source}{extra}")
+        if error:
+            print(f"  {name:<28} {'broken':<10} {entry.source}  {error}")
+            continue
+        about = first_line(entry.cls.__doc__) if entry.cls is not None else docs.get(name, "")
+        print(_fit(f"  {name:<28} {entry.origin:<10} {about or entry.source}"))
     for module, error in sorted(registry.broken_modules.items()):
         print(f"  {'?':<28} {'broken':<8} {module}  {error}")
     print("scenarios:")
     for name in builtin_scenarios():
         try:
-            scored = "scored" if load_scenario(name).scored else "not scored"
+            scenario = load_scenario(name)
         except RipplebError as exc:
-            scored = f"broken  {exc}"
-        print(f"  {name:<28} {scored}")
-    print("conditions:")
-    for name, description in CONDITIONS.items():
-        print(f"  {name:<28} {description}")
+            print(f"  {name:<28} broken      {exc}")
+            continue
+        scored = "scored" if scenario.scored else "not scored"
+        print(_fit(f"  {name:<28} {scored:<10} {first_sentence(scenario.description)}"))
+    print("conditions (what happened between calibration and scoring):")
+    for name, text in CONDITIONS.items():
+        print(_fit(f"  {name:<28} {'':<10} {text}"))
     return 0
 
 
-def probe_plugins(registry, timeout: float) -> dict[str, str]:
+def first_line(doc: str | None) -> str:
+    """The first non-empty line of a docstring, without reST markup."""
+    lines = [line.strip() for line in (doc or "").strip().splitlines() if line.strip()]
+    return lines[0].replace("``", "") if lines else ""
+
+
+#: Words ending in a full stop that do not end a sentence.
+_ABBREVIATIONS = ("Fig", "Figs", "Sec", "Eq", "e.g", "i.e", "al", "approx", "cf")
+
+
+def first_sentence(text: str) -> str:
+    """The first sentence of ``text`` on one line (a full stop after an abbreviation such
+    as "Fig." does not end it)."""
+    import re
+
+    flat = " ".join(text.split())
+    for match in re.finditer(r"\.\s", flat):
+        word = flat[: match.start()].rsplit(" ", 1)[-1]
+        if word not in _ABBREVIATIONS:
+            return flat[: match.start() + 1]
+    return flat
+
+
+def _fit(line: str) -> str:
+    """``line`` wrapped at :data:`LIST_WIDTH`, continuation lines under the description."""
+    import textwrap
+
+    indent = " " * 42  # under the description: 2 + 28 + 1 + 10 + 1
+    return textwrap.fill(line, LIST_WIDTH, subsequent_indent=indent, break_on_hyphens=False)
+
+
+def probe_plugins(registry, timeout: float) -> tuple[dict[str, str], dict[str, str]]:
     """Import every plugin in its own isolated child, under ``timeout`` seconds each;
-    return ``{name: one-line error}`` of those that failed. The parent never runs
-    plugin code, so a plugin that hangs or exits at import delays only itself."""
+    return ``{name: one-line error}`` of those that failed and ``{name: first docstring
+    line}`` of those that loaded. The parent never runs plugin code, so a plugin that
+    hangs or exits at import delays only itself."""
     from rippleb.errors import PluginError
     from rippleb.pool import Pool
 
     def job(entry):
         def load():
-            entry.load()
-            return b""
+            return first_line(entry.load().__doc__).encode()
         return load
 
     plugins = [name for name in registry.names("plugin") if not registry.entries[name].broken]
-    pool, errors = Pool(max(1, min(len(plugins), os.cpu_count() or 1))), {}
+    pool, errors, docs = Pool(max(1, min(len(plugins), os.cpu_count() or 1))), {}, {}
     pending = list(plugins)
     while pending or pool.busy:
         while pending and pool.free:
             name = pending.pop(0)
             pool.submit(name, job(registry.entries[name]), timeout)
         for fin in pool.wait():
-            if fin.kind == "raised":
+            if fin.kind == "done":
+                docs[fin.key] = bytes(fin.value).decode(errors="replace")
+            elif fin.kind == "raised":
                 errors[fin.key] = fin.value.split("is broken: ", 1)[-1] if PluginError.__name__ in fin.value \
                     else fin.value
             elif fin.kind == "timeout":
                 errors[fin.key] = f"TimeoutError: import took longer than {timeout:g} s (--import-timeout)"
             elif fin.kind != "done":
                 errors[fin.key] = f"import ended the process (exit code {fin.value})"
-    return errors
+    return errors, docs
 
 
 def cmd_run(args) -> int:
     """``rippleb run``."""
-    from rippleb.report import collect_provenance
+    from rippleb.provenance import collect_provenance
 
     start = time.perf_counter()
     provenance = collect_provenance(args.argv)
@@ -286,9 +342,11 @@ def _run(args, start: float) -> int:
                                out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress,
                                on_start=started)
         if args.calibration is None:
-            print("rippleb: warning: no --calibration: methods are fitted on the scored log "
-                  "itself, which flatters every method; pass a separate calibration recording",
-                  file=sys.stderr)
+            print("rippleb: warning: no --calibration: each method was fitted on the scored log "
+                  "itself, not on a calibration recording; a log without motion both ways, a range "
+                  "of speeds and known loads fits some methods worse than a calibration recording "
+                  "would, or not at all, so these rows are no fair comparison; pass --calibration "
+                  "FILE, e.g. one written by 'rippleb simulate calibration'", file=sys.stderr)
     elif args.resume is not None:
         config = runner.read_config(args.resume)
         args.out_dir = args.resume
@@ -305,24 +363,26 @@ def _run(args, start: float) -> int:
         args.out_dir = args.out or runner.default_out_dir()
         frame = runner.run(args.methods, args.scenarios,
                            runner.DEFAULT_SEEDS if args.seeds is None else args.seeds,
-                           conditions=args.conditions, seed_start=args.seed_start or 0, jobs=args.jobs, out=args.out_dir,
-                           timeout=timeout, memory_mb=memory, progress=progress,
-                               on_start=started)
-    from rippleb.report import summary_markdown
+                           conditions=args.conditions, seed_start=args.seed_start or 0, jobs=args.jobs,
+                           out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress,
+                           on_start=started)
+    from rippleb.tables import summary_text
 
-    print(summary_markdown(frame))
+    print(summary_text(frame))
     counts = frame["status"].value_counts().to_dict() if len(frame) else {}
     print(f"\n{len(frame)} rows ({', '.join(f'{v} {k}' for k, v in counts.items()) or 'none'}) "
           f"in {args.out_dir / 'results.csv'}; total wall time {time.perf_counter() - start:.1f} s")
+    print(f"Next: rippleb report {args.out_dir} (tables with intervals, figures; --html for the "
+          f"interactive page)")
     return _report_broken_plugins(frame)
 
 
 def _report_broken_plugins(frame) -> int:
     """One stderr line per requested plugin that failed to import; exit 1 if any.
 
-    Its rows are kept with status ``error`` and the other methods ran, but a run asked to
-    include a method it could not load is not a clean run. Judged from the rows (every row
-    of the method failed to import it): the CLI never imports plugin code itself.
+    Its rows are kept with status ``error`` and the other methods ran (docs/design.md), but a
+    run asked to include a method it could not load is not a clean run. Judged from the rows
+    (every row of the method failed to import it): the CLI never imports plugin code itself.
     """
     broken = 0
     if not len(frame):
@@ -376,11 +436,19 @@ def cmd_report(args) -> int:
     """``rippleb report``."""
     from rippleb.report import report
 
+    seeds = None
+    if args.speed_seeds is not None:
+        if args.speed_seeds < 1:
+            raise InputError(f"--speed-seeds {args.speed_seeds}: must be at least 1")
+        seeds = args.speed_seeds
     written = report(args.dir, args.out, figures=not args.no_figures, figure_seed=args.figure_seed,
-                     argv=args.argv)
+                     argv=args.argv, published=args.published, html=args.html,
+                     figure_format=args.format, speed_seeds=seeds)
     for warning in written["warnings"]:
         print(f"rippleb: warning: {warning}", file=sys.stderr)
     print(f"wrote {written['readme']}, {written['csv']}, {written['provenance']}"
           + (f" and {len(written['figures'])} figures in {written['readme'].parent / 'figures'}"
              if written["figures"] else ""))
+    if written["html"] is not None:
+        print(f"open {written['html']} in a browser (self-contained: no network needed)")
     return 0

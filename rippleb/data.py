@@ -45,10 +45,10 @@ class JointSpec:
     Parameters
     ----------
     fs
-        DAQ sample rate of strain and current [Hz]. Default 20 kHz (DESIGN.md).
+        DAQ sample rate of strain and current [Hz]. Default 20 kHz (docs/design.md).
     control_rate
         Control tick rate [Hz]; the runner hands ``fs / control_rate`` samples per
-        ``step``. Default 1 kHz (DESIGN.md).
+        ``step``. Default 1 kHz (docs/design.md).
     gear_ratio
         Harmonic-drive reduction N. Default 100 (SHD-25-100, the paper's Sec. IV-A).
     counts_per_rev

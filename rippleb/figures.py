@@ -1,5 +1,9 @@
 """Matplotlib figures of the benchmark.
 
+The replicas of the paper's figures, and :func:`draw_all`, which draws every figure a run
+allows (the others live in :mod:`rippleb.error_figures`, the shared style and signals in
+:mod:`rippleb.plotting`).
+
 ``plot_order_spectra`` replicates the paper's Fig. 2: the strain spectrum at several
 constant wave-generator speeds, over time (peaks move with speed) beside over angle,
 re-sampled at encoder positions (peaks stay at orders 2, 4, 8).
@@ -11,6 +15,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from rippleb.error_figures import (error_by_speed, error_by_speed_over_seeds, longest_rest_restart,  # noqa: F401
+                                   plot_accuracy_vs_cost, plot_error_vs_speed, plot_residual_spectra,
+                                   plot_restart_zoom, residual_spectra, speed_edges)
+from rippleb.plotting import (METHOD_STYLE, MOTION_EDGE_LABEL, SIGNAL_SCENARIOS, ScenarioSignals,  # noqa: F401
+                              _amplitude, _motion_edges, _pyplot, _save, fit_methods, stream_methods, style)
 
 #: Wave-generator speeds of the Fig. 2 replica [rev/s]: slow to brisk motor speeds.
 DEFAULT_SPEEDS = (1.0, 2.0, 4.0, 6.0, 8.0)
@@ -28,11 +38,6 @@ class SpeedSpectra:
     time_amp: np.ndarray
     order: np.ndarray
     angle_amp: np.ndarray
-
-
-def _amplitude(x: np.ndarray) -> np.ndarray:
-    window = np.hanning(len(x))
-    return 2.0 * np.abs(np.fft.rfft((x - x.mean()) * window)) / window.sum()
 
 
 def constant_speed_run(speed: float, seed: int, revolutions: float = 16.0, load: float = 20.0):
@@ -125,112 +130,6 @@ def plot_order_spectra(out_png: str | Path, seed: int = 0,
     return out
 
 
-# --------------------------------------------------------------------------- report figures
-#
-# The figures below show signals of one device (``seed``), re-simulated and streamed through
-# the runner's own loop (:mod:`rippleb.streaming`, methods from the registry), or summarise
-# the result rows. ``draw_all`` makes every figure the run's methods and scenarios allow.
-
-#: One colour and line style per built-in method, the same in every figure.
-METHOD_STYLE = {
-    "raw": ("tab:blue", "-"), "lowpass": ("tab:cyan", "-"), "current-based": ("m", "--"),
-    "order-tracking": ("tab:red", "-"), "order-tracking-no-deadzone": ("tab:orange", "-."),
-    "order-tracking-no-backprop": ("tab:brown", ":"), "switched-notch": ("tab:green", "-"),
-    "kalman-ripple": ("tab:purple", "-"),
-}
-#: Scenarios whose signals the figures need: Table I/Fig. 5/6, speed coverage, restarts.
-SIGNAL_SCENARIOS = ("paper-quintic", "speed-sweep", "stop-restart")
-_OTHER_COLORS = ("tab:olive", "tab:gray", "tab:pink", "k")
-
-
-def style(method: str, index: int = 0) -> dict:
-    """matplotlib keyword arguments of ``method``'s line."""
-    color, ls = METHOD_STYLE.get(method, (_OTHER_COLORS[index % len(_OTHER_COLORS)], "-"))
-    return {"color": color, "ls": ls, "label": method}
-
-
-@dataclass
-class ScenarioSignals:
-    """One re-simulated scenario and each method's causal estimate on it.
-
-    ``sim`` is the :class:`~rippleb.simulator.Simulation`; ``estimates`` maps a method to its
-    estimate [Nm] per sample; ``errors`` a method that failed to the reason.
-    """
-
-    sim: object
-    estimates: dict
-    errors: dict
-
-
-def fit_methods(methods, seed: int) -> tuple[dict, dict]:
-    """Instantiate and ``fit`` each method on the calibration log of ``seed``, once.
-
-    Returns ``(fitted, errors)``: method name to fitted instance, and to a one-line error.
-    """
-    from rippleb.registry import Registry, one_line
-    from rippleb.simulator import simulate
-
-    registry = Registry.discover()
-    calibration = simulate("calibration", seed).log.for_method(keep_ref=True)
-    fitted, errors = {}, {}
-    for name in methods:
-        try:
-            method = registry.get(name).load()()
-            method.fit(calibration)
-        except Exception as exc:  # a failing method costs its curves, not the report
-            errors[name] = one_line(exc)
-        else:
-            fitted[name] = method
-    return fitted, errors
-
-
-def stream_methods(fitted: dict, scenario: str, seed: int) -> ScenarioSignals:
-    """Simulate ``scenario`` on ``seed`` and stream it through each fitted method.
-
-    Each method is ``reset`` before its run (the Method contract), then fed blocks exactly
-    as the runner does (:func:`rippleb.streaming.prepare_blocks`, :func:`~rippleb.streaming.stream`).
-    """
-    from rippleb.registry import one_line
-    from rippleb.simulator import simulate
-    from rippleb.streaming import prepare_blocks, stream
-
-    sim = simulate(scenario, seed)
-    visible = sim.log.for_method(keep_ref=False)
-    estimates, errors = {}, {}
-    for name, method in fitted.items():
-        try:
-            method.reset(visible.spec)
-            estimates[name], _ = stream(method.step, prepare_blocks(visible), len(visible))
-        except Exception as exc:
-            errors[name] = one_line(exc)
-    return ScenarioSignals(sim, estimates, errors)
-
-
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _save(fig, out_png) -> Path:
-    out = Path(out_png)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    fig.clf()
-    _pyplot().close(fig)
-    return out
-
-
-def _motion_edges(ax, sig: ScenarioSignals) -> None:
-    """Dashed verticals where the joint starts and stops (as in the paper's Figs. 4-6)."""
-    t, moving = sig.sim.log.t, np.asarray(sig.sim.moving, bool)
-    for i in np.flatnonzero(np.diff(moving.astype(int))) + 1:
-        ax.axvline(t[i], color="k", lw=0.7, ls="--", alpha=0.6)
-
-
 def plot_trajectory(sig: ScenarioSignals, out_png) -> Path:
     """Replica of the paper's Fig. 4: desired position, velocity and acceleration of the
     ``paper-quintic`` joint, with the start and end of the motion dashed."""
@@ -283,7 +182,7 @@ def plot_estimates(sig: ScenarioSignals, out_png, seed: int = 0) -> Path:
     ``torque_ref`` (eq. 7) on ``paper-quintic``, one panel per method; the first panel
     is the paper's own pair, current-based and order tracking."""
     plt = _pyplot()
-    from rippleb.report import method_order
+    from rippleb.stats import method_order
 
     log = sig.sim.log
     names = method_order(sig.estimates)
@@ -321,142 +220,18 @@ def plot_estimates(sig: ScenarioSignals, out_png, seed: int = 0) -> Path:
     return _save(fig, out_png)
 
 
-def error_by_speed(signals, n_bins: int = 12) -> dict:
-    """RMS error against ``torque_true`` per bin of joint speed, pooled over scenarios.
-
-    Samples inside each scenario's evaluation window; bin 0 holds the samples at rest
-    (commanded speed zero), the others equal widths of ``|joint speed|`` up to its maximum.
-    Returns ``{"speed": bin centres [rad/s], method: RMS per bin [Nm] (NaN if empty)}``.
-    """
-    speeds, mask_all = [], []
-    for sig in signals:
-        speeds.append(np.abs(sig.sim.joint_velocity))
-        mask_all.append(np.asarray(sig.sim.eval_mask, bool))
-    speed = np.concatenate(speeds)
-    inside = np.concatenate(mask_all)
-    moving = np.concatenate([np.asarray(s.sim.moving, bool) for s in signals])
-    edges = np.linspace(0.0, speed[inside & moving].max() if (inside & moving).any() else 1.0, n_bins + 1)
-    which = np.where(moving, np.clip(np.digitize(speed, edges[1:-1]) + 1, 1, n_bins), 0)
-    out = {"speed": np.concatenate([[0.0], 0.5 * (edges[:-1] + edges[1:])])}
-    methods = set.intersection(*(set(s.estimates) for s in signals)) if signals else set()
-    for name in methods:
-        err = np.concatenate([s.estimates[name] - s.sim.log.torque_true for s in signals])
-        rms = np.full(n_bins + 1, np.nan)
-        for b in range(n_bins + 1):
-            sel = inside & (which == b)
-            if sel.any():
-                rms[b] = np.sqrt(np.mean(err[sel] ** 2))
-        out[name] = rms
-    return out
+FORMATS = ("png", "svg", "pdf")
 
 
-def plot_error_vs_speed(signals, out_png, seed: int = 0) -> Path:
-    """RMS error against joint speed per method (:func:`error_by_speed`), log scale."""
-    from rippleb.report import method_order
+def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
+             keep: dict | None = None) -> tuple[dict, list]:
+    """Every figure the run allows, into ``out_dir``, as ``fmt`` (png, svg or pdf).
 
-    plt = _pyplot()
-    table = error_by_speed(signals)
-    fig, ax = plt.subplots(figsize=(9, 5.5))
-    names = method_order(k for k in table if k != "speed")
-    for i, name in enumerate(names):
-        ax.plot(table["speed"], table[name], marker="o", ms=3.5, lw=1.2, **style(name, i))
-    ax.set_yscale("log")
-    scen = ", ".join(s.sim.log.meta.get("scenario", "?") for s in signals)
-    ax.set(xlabel="|joint speed| [rad/s] (0: at rest)", ylabel="RMS error against torque_true [Nm]",
-           title=f"Error against joint speed, pooled over {scen}; device seed {seed}")
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8, ncols=2)
-    fig.tight_layout()
-    return _save(fig, out_png)
-
-
-def longest_rest_restart(sig: ScenarioSignals) -> int | None:
-    """Index of the restart (rest to motion, inside the window) after the longest rest."""
-    moving = np.asarray(sig.sim.moving, bool)
-    starts = np.flatnonzero(moving[1:] & ~moving[:-1]) + 1
-    starts = starts[np.asarray(sig.sim.eval_mask, bool)[starts]]
-    if len(starts) == 0:
-        return None
-    stops = np.flatnonzero(moving[:-1] & ~moving[1:]) + 1
-    rest = [i - (stops[stops < i].max() if (stops < i).any() else 0) for i in starts]
-    return int(starts[int(np.argmax(rest))])
-
-
-def plot_restart_zoom(sig: ScenarioSignals, out_png, seed: int = 0,
-                      before_s: float = 0.15, after_s: float = 0.35) -> Path | None:
-    """Zoom on the restart after the longest rest of ``stop-restart``: estimates (top) and
-    their error (bottom); this is where the dead zone and back propagation act."""
-    from rippleb.report import method_order
-
-    i = longest_rest_restart(sig)
-    if i is None:
-        return None
-    plt = _pyplot()
-    log = sig.sim.log
-    t0 = log.t[i]
-    sel = (log.t >= t0 - before_s) & (log.t <= t0 + after_s)
-    fig, (ax, ax_e) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
-    ax.plot(log.t[sel], log.torque_true[sel], color="k", lw=2.0, label="torque_true")
-    names = method_order(sig.estimates)
-    for k, name in enumerate(names):
-        est = sig.estimates[name][sel]
-        ax.plot(log.t[sel], est, lw=1.0, **style(name, k))
-        ax_e.plot(log.t[sel], est - log.torque_true[sel], lw=1.0, **style(name, k))
-    for a in (ax, ax_e):
-        a.axvline(t0, color="k", ls="--", lw=0.8)
-        a.grid(alpha=0.3)
-    ax.set(ylabel="torque [Nm]", title=f"Restart after the longest rest of stop-restart (at {t0:.3f} s, "
-                                      f"dashed), device seed {seed}")
-    ax_e.set(xlabel="time [s]", ylabel="estimate - torque_true [Nm]")
-    ax.legend(fontsize=7, ncols=3, loc="best")
-    fig.tight_layout()
-    return _save(fig, out_png)
-
-
-def plot_accuracy_vs_cost(frame, out_png) -> Path:
-    """Accuracy against per-tick cost, from the rows: per method, ``rms_error_nm`` averaged
-    over scenarios for each seed (point: mean over seeds, bar: 95 % t-interval) against the
-    median over rows of ``us_per_tick_p99`` (bar: 25th to 75th percentile)."""
-    from rippleb.report import method_order, t_interval
-
-    plt = _pyplot()
-    ok = frame[frame["status"] == "ok"]
-    names = method_order(ok["method"].unique())
-    # Average only over scenarios every method finished, so that a method is not favoured
-    # by missing its hardest scenario.
-    common = set.intersection(*(set(ok.loc[ok["method"] == m, "scenario"]) for m in names)) if names else set()
-    ok = ok[ok["scenario"].isin(common)]
-    fig, ax = plt.subplots(figsize=(9, 6))
-    for k, name in enumerate(names):
-        rows = ok[ok["method"] == name]
-        per_seed = rows.groupby("seed")["rms_error_nm"].mean()
-        y, half, _ = t_interval(per_seed)
-        cost = rows["us_per_tick_p99"].dropna()
-        if cost.empty or not np.isfinite(y):
-            continue
-        x, lo, hi = np.percentile(cost, [50, 25, 75])
-        kw = style(name, k)
-        ax.errorbar([x], [y], xerr=[[x - lo], [hi - x]], yerr=[[half if np.isfinite(half) else 0]] * 2,
-                    fmt="o", ms=7, color=kw["color"], capsize=3, label=name)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    n_seeds, n_scen = ok["seed"].nunique(), ok["scenario"].nunique()
-    ax.set(xlabel="compute time of one control tick, p99 [us] (median over rows; bar 25-75 %)",
-           ylabel="RMS error against torque_true [Nm]",
-           title=f"Accuracy against per-tick cost: mean over the {n_scen} scenarios every method "
-                 f"finished,\nthen over {n_seeds} seed(s) (bar: 95 % t-interval)")
-    ax.grid(alpha=0.3, which="both")
-    # a legend, not labels at the points: the order-tracking family sits too close for text
-    ax.legend(fontsize=8, loc="lower left")
-    fig.tight_layout()
-    return _save(fig, out_png)
-
-
-def draw_all(frame, out_dir, seed: int = 0) -> tuple[dict, list]:
-    """Every figure the run allows, into ``out_dir``.
-
-    Signal figures use the run's methods with at least one ok row, on the scenarios of
-    :data:`SIGNAL_SCENARIOS` that the run scored, re-simulated on ``seed``.
+    Signal figures use the run's methods with at least one ok row of the ``same-session``
+    condition, on the scenarios of :data:`SIGNAL_SCENARIOS` that the run scored,
+    re-simulated on ``seed``; the error-against-speed figure repeats that on every seed of
+    ``speed_seeds`` (default: every seed of the run) to show the mean over devices.
+    ``keep``, if given, receives the signals of ``seed`` per scenario (for the HTML page).
 
     Returns
     -------
@@ -464,46 +239,76 @@ def draw_all(frame, out_dir, seed: int = 0) -> tuple[dict, list]:
         ``{name: (path, caption)}`` in README order, and one line per method or figure
         that could not be drawn.
     """
-    from rippleb.report import method_order
+    from rippleb.conditions import DEFAULT_CONDITION
+    from rippleb.provenance import seeds_text
+    from rippleb.stats import method_order, with_condition
 
+    if fmt not in FORMATS:
+        from rippleb.errors import InputError
+
+        raise InputError(f"--format {fmt}: choose one of {', '.join(FORMATS)}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    path = lambda name: out_dir / f"{name}.{fmt}"  # noqa: E731
     figures, warnings = {}, []
-    figures["fig2_order_spectra"] = (plot_order_spectra(out_dir / "fig2_order_spectra.png", seed=seed),
+    figures["fig2_order_spectra"] = (plot_order_spectra(path("fig2_order_spectra"), seed=seed),
                                      f"Strain spectra over time and over angle (Fig. 2 replica, seed {seed})")
-    ok = frame[frame["status"] == "ok"]
+    frame = with_condition(frame)
+    ok = frame[(frame["status"] == "ok") & (frame["condition"] == DEFAULT_CONDITION)]
     methods = method_order(ok["method"].unique())
     scenarios = [s for s in SIGNAL_SCENARIOS if s in set(ok["scenario"])]
     signals = {}
     if methods and scenarios:
-        fitted, errors = fit_methods(methods, seed)
-        warnings += [f"figures: {m} not drawn, fit failed: {e}" for m, e in errors.items()]
+        signals, more = _signals_of_seed(methods, scenarios, seed)
+        warnings += more
         for scenario in scenarios:
-            signals[scenario] = stream_methods(fitted, scenario, seed)
-            warnings += [f"figures: {m} not drawn on {scenario}: {e}"
-                         for m, e in signals[scenario].errors.items()]
             warnings += _check_against_rows(signals[scenario], ok, scenario, seed)
+        if keep is not None:
+            keep.update(signals)
     if "paper-quintic" in signals:
         sig = signals["paper-quintic"]
-        figures["fig4_trajectory"] = (plot_trajectory(sig, out_dir / "fig4_trajectory.png"),
+        figures["fig4_trajectory"] = (plot_trajectory(sig, path("fig4_trajectory")),
                                       "Trajectory of paper-quintic (Fig. 4 replica)")
         figures["fig5_ripple_compensation"] = (
-            plot_ripple_compensation(sig, out_dir / "fig5_ripple_compensation.png", seed),
+            plot_ripple_compensation(sig, path("fig5_ripple_compensation"), seed),
             f"Raw against order-tracking filtered torque on paper-quintic (Fig. 5 replica, seed {seed})")
         figures["fig6_estimates"] = (
-            plot_estimates(sig, out_dir / "fig6_estimates.png", seed),
+            plot_estimates(sig, path("fig6_estimates"), seed),
             f"Each estimate against the model reference on paper-quintic (Fig. 6 replica, seed {seed})")
     if signals:
+        seeds = sorted(int(k) for k in (ok["seed"].unique() if speed_seeds is None else speed_seeds))
+        edges = speed_edges(list(signals.values()))
+        tables = [error_by_speed(list(signals.values()), edges=edges)]
+        for other in (k for k in seeds if k != seed):
+            more_signals, _ = _signals_of_seed(methods, scenarios, other)
+            tables.append(error_by_speed(list(more_signals.values()), edges=edges))
+        text = seeds_text(sorted(set(seeds) | {seed})).replace("(", "devices (")
         figures["error_vs_speed"] = (
-            plot_error_vs_speed(list(signals.values()), out_dir / "error_vs_speed.png", seed),
-            f"RMS error against joint speed per method (seed {seed})")
+            plot_error_vs_speed(error_by_speed_over_seeds(tables), path("error_vs_speed"), text, scenarios),
+            f"RMS error against joint speed per method, mean over {text}")
+        spectral = next((signals[s] for s in ("speed-sweep", "paper-quintic", "stop-restart") if s in signals))
+        figures["residual_spectra"] = (
+            plot_residual_spectra(spectral, path("residual_spectra"), seed),
+            f"What each method leaves behind: spectrum of its error over order and over frequency (seed {seed})")
     if "stop-restart" in signals:
-        path = plot_restart_zoom(signals["stop-restart"], out_dir / "restart_zoom.png", seed)
-        if path is not None:
-            figures["restart_zoom"] = (path, f"Zoom on a restart of stop-restart (seed {seed})")
-    figures["accuracy_vs_cost"] = (plot_accuracy_vs_cost(frame, out_dir / "accuracy_vs_cost.png"),
-                                   "Accuracy against per-tick cost, from the rows")
+        zoom = plot_restart_zoom(signals["stop-restart"], path("restart_zoom"), seed)
+        if zoom is not None:
+            figures["restart_zoom"] = (zoom, f"Zoom on a restart of stop-restart (seed {seed})")
+    figures["accuracy_vs_cost"] = (plot_accuracy_vs_cost(ok, path("accuracy_vs_cost")),
+                                   "Accuracy against per-tick cost, from the rows (same-session)")
     return figures, warnings
+
+
+def _signals_of_seed(methods, scenarios, seed: int) -> tuple[dict, list]:
+    """Fit ``methods`` on the calibration log of ``seed`` and stream each scenario."""
+    fitted, errors = fit_methods(methods, seed)
+    warnings = [f"figures: {m} not drawn on seed {seed}, fit failed: {e}" for m, e in errors.items()]
+    signals = {}
+    for scenario in scenarios:
+        signals[scenario] = stream_methods(fitted, scenario, seed)
+        warnings += [f"figures: {m} not drawn on {scenario} seed {seed}: {e}"
+                     for m, e in signals[scenario].errors.items()]
+    return signals, warnings
 
 
 def _check_against_rows(sig: ScenarioSignals, ok, scenario: str, seed: int) -> list[str]:

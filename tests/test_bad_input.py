@@ -219,6 +219,7 @@ def _case_names():
         return list(_setup(Path(tmp)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", _case_names())
 def test_bad_input_is_one_line_exit_2(outcomes, case):
     _, cases, procs, _ = outcomes
@@ -230,6 +231,7 @@ def test_bad_input_is_one_line_exit_2(outcomes, case):
         assert word in proc.stderr, proc.stderr
 
 
+@pytest.mark.slow
 def test_nothing_that_looks_like_a_result_is_written(outcomes):
     root, _, _, created = outcomes
     # no results.csv, no run directory, no log, and no file made by a payload
@@ -296,6 +298,7 @@ def test_scenario_and_log_readers_use_no_code_loaders():
         assert "pickle.load" not in (root / name).read_text(), name
 
 
+@pytest.mark.slow
 def test_names_cannot_make_the_runner_write_outside_out(tmp_path):
     """A plugin named ``../../escape`` and a scenario file named ``..x.toml``: every file the
     run writes stays under ``--out``."""

@@ -7,6 +7,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -24,11 +25,21 @@ def test_help_of_every_command():
         assert proc.returncode == 0 and "usage: rippleb" in proc.stdout
 
 
+def test_report_help_prints_percent_signs_once():
+    proc = rippleb("report", "--help")
+    assert "95 % confidence" in proc.stdout and "%%" not in proc.stdout
+
+
 def test_list_shows_methods_and_scenarios():
     proc = rippleb("list")
     assert proc.returncode == 0
     assert "raw" in proc.stdout and "builtin" in proc.stdout
     assert "paper-quintic" in proc.stdout and "calibration                  not scored" in proc.stdout
+    # one description per method (its docstring) and scenario (its TOML description)
+    assert "Order tracking with dead-zone switching and back" in proc.stdout
+    assert "The paper's Fig. 4 experiment: one 5th-order polynomial" in proc.stdout
+    assert "re-assembled" in proc.stdout
+    assert max(len(line) for line in proc.stdout.splitlines()) <= 100
 
 
 @pytest.mark.parametrize("args, message", [
@@ -53,6 +64,7 @@ def test_debug_shows_the_traceback(tmp_path):
     assert proc.returncode != 0 and "Traceback" in proc.stderr
 
 
+@pytest.mark.slow
 def test_simulate_run_and_report(tmp_path):
     log = tmp_path / "log.parquet"
     assert rippleb("simulate", "static-contact", "--seed", "1", "--out", log).returncode == 0
@@ -92,7 +104,10 @@ def test_sigint_then_resume(tmp_path):
     args = [sys.executable, "-m", "rippleb", "run", "--methods", "raw,lowpass", "--scenarios",
             "paper-quintic,creep,reversal", "--seeds", "3", "--jobs", "1", "--out", str(out),
             "--no-progress"]
-    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # Ctrl-C as in a terminal: a child of a background process (a pytest-xdist worker)
+    # inherits SIGINT ignored, and Python keeps it ignored.
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:   # interrupt once some, not all, rows are done
         if (out / "results.csv").is_file() and len(pd.read_csv(out / "results.csv")) >= 2:
@@ -126,3 +141,23 @@ def test_non_editable_install_lists_builtins(tmp_path):
                                          capture_output=True, text=True, cwd=elsewhere, env=env).stdout
     for name in ("raw", "lowpass", "paper-quintic", "calibration"):
         assert name in proc.stdout
+    # the installed copy knows the commit it was built from (setuptools-scm), without git
+    head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True)
+    if head.returncode == 0:
+        state = subprocess.run([sys.executable, "-c", "from rippleb.provenance import git_state; "
+                                "s = git_state(); print(s['git_commit'], s.get('git_source'))"],
+                               capture_output=True, text=True, cwd=elsewhere, env=env).stdout.split()
+        assert state == [head.stdout.strip(), "build"]
+
+
+def test_run_on_a_log_without_calibration_warns_what_is_true(tmp_path):
+    n = 4000
+    t = np.arange(n) / 20000.0
+    torque = 5.0 * np.sin(2 * np.pi * 3 * t)
+    pd.DataFrame({"t": t, "strain": 1e-3 * torque, "encoder": np.arange(n) // 4, "current": 0.01 * torque,
+                  "torque_ref": torque}).to_csv(tmp_path / "rec.csv", index=False)
+    proc = rippleb("run", "--log", tmp_path / "rec.csv", "--methods", "raw", "--jobs", "1", "--no-progress",
+                   "--out", tmp_path / "run", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "not on a calibration recording" in proc.stderr and "flatters" not in proc.stderr
+    assert proc.stdout.rstrip().splitlines()[-1].startswith(f"Next: rippleb report {tmp_path / 'run'}")

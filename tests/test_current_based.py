@@ -155,3 +155,11 @@ def test_fit_refuses_a_log_without_motion():
 def test_conformance():
     testing = pytest.importorskip("rippleb.testing")
     testing.check_method(CurrentBased)
+
+
+def test_fit_on_a_log_that_turns_one_way_says_why_and_what_to_do():
+    # e.g. the scored paper-quintic log used as its own calibration (run --log without
+    # --calibration): Coulomb friction and the current offset are the same regressor
+    log = _log([5.0, 20.0, 40.0], 1.5, lambda t: 10.0 * np.sin(t))[0]
+    with pytest.raises(ValueError, match="one direction only.*--calibration"):
+        CurrentBased().fit(log)

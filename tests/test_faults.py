@@ -149,6 +149,7 @@ def fault_rows(tmp_path_factory):
     return rippleb.run(methods=None, scenarios=[str(p) for p in paths], seeds=[0], jobs=2)
 
 
+@pytest.mark.slow
 def test_every_builtin_method_survives_every_fault(fault_rows):
     from rippleb.registry import Registry
 
@@ -161,6 +162,7 @@ def test_every_builtin_method_survives_every_fault(fault_rows):
     assert np.isfinite(ok[["rms_error_nm", "max_error_nm", "rms_error_ref_nm"]].to_numpy()).all()
 
 
+@pytest.mark.slow
 def test_the_results_show_the_faults(fault_rows):
     # (each fault file has its own name, hence its own noise: only large effects compare)
     rms = fault_rows.pivot(index="method", columns="scenario", values="rms_error_nm")

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -141,6 +142,7 @@ def _assert_one_line(code: int, err: str, name: str):
     assert name in err, err
 
 
+@pytest.mark.slow
 @settings(max_examples=SCALE or 60, **SETTINGS)
 @given(doc=_scenario, garbage=_rarely(st.none(), st.text(max_size=40)))
 def test_random_scenario_files_give_a_log_or_one_line(doc, garbage):
@@ -186,6 +188,7 @@ _log = st.fixed_dictionaries({
 })
 
 
+@pytest.mark.slow
 @settings(max_examples=SCALE or 40, **SETTINGS)
 @given(spec=_log)
 def test_random_logs_give_rows_or_one_line(spec):

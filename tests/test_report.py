@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from rippleb import figures, report
+from rippleb import figures, report, tables
 from rippleb.cli import main
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -127,7 +127,7 @@ def test_failed_rows_are_listed_and_left_out_of_the_means():
              "status": "timeout", "message": "killed after 300 s"}]
     text = report.tables_markdown(_frame(rows))
     assert "1 of 2 rows did not finish ok" in text
-    assert "| raw      | creep      | 1      | timeout  | killed after 300 s |" in text
+    assert "| raw      | creep      | same-session | 1      | timeout  | killed after 300 s |" in text
     assert "500" not in report.matrix_markdown(_frame(rows), "rms_error_nm")
 
 
@@ -154,7 +154,9 @@ def _signals(n=8000, fs=2000.0):
     t = np.arange(n) / fs
     speed = np.where((t > 0.5) & (t < 2.0), 1.0, 0.0) + np.where(t > 3.0, 0.5, 0.0)
     truth = 10 * np.sin(t)
-    log = SimpleNamespace(t=t, torque_true=truth, torque_ref=truth + 0.2, meta={"scenario": "fake"})
+    counts = np.floor(np.cumsum(speed) / fs * 100 * 2500 / (2 * np.pi)).astype(int)  # motor at 100 x joint
+    log = SimpleNamespace(t=t, torque_true=truth, torque_ref=truth + 0.2, meta={"scenario": "fake"},
+                          encoder=counts, spec=SimpleNamespace(fs=fs, counts_per_rev=2500, control_rate=1000.0))
     sim = SimpleNamespace(log=log, moving=speed > 0, joint_velocity=speed, eval_mask=t > 0.1)
     ripple = np.sin(2 * np.pi * 8 * t) * (speed > 0)
     return figures.ScenarioSignals(sim, {"raw": truth + ripple, "order-tracking": truth + 0.1 * ripple,
@@ -246,14 +248,16 @@ def test_report_through_the_cli_on_a_tiny_run(tmp_path, capsys):
     assert (pub / "results.csv").read_bytes() == (run_dir / "results.csv").read_bytes()
     frame = report.read_results_exact(pub / "results.csv")
     assert report.tables_markdown(frame) in readme
-    assert "4 rows: 2 methods x 1 scenarios x 2 seeds (4 ok)" in readme
+    assert "4 rows: 2 methods x 1 scenarios x 1 condition x 2 seeds (4 ok)" in readme
+    assert readme.startswith("# rippleb report of `")  # a trial report, not the published one
     assert "Not available" in readme  # no current-based/order-tracking in this run
+    assert "mean over 0-1 devices (2 seeds)" in readme  # error against speed over every seed
     assert f"`rippleb {' '.join(run_args)}`" in readme
     prov = json.loads((pub / "provenance.json").read_text())
     assert prov["seeds"] == [0, 1] and prov["figure_seed"] == 1
     assert prov["run"]["command"] == recorded["command"]
     for name in ("fig2_order_spectra", "fig4_trajectory", "fig5_ripple_compensation", "fig6_estimates", "error_vs_speed",
-                 "accuracy_vs_cost"):
+                 "residual_spectra", "accuracy_vs_cost"):
         assert f"figures/{name}.png" in readme
         assert _is_png(pub / "figures" / f"{name}.png")
     assert "warning" not in capsys.readouterr().err  # figure signals reproduce the rows of seed 1
@@ -272,3 +276,156 @@ def test_a_resumed_run_keeps_its_first_command_and_adds_the_resume(tmp_path):
     assert recorded["resumes"] == ["rippleb " + " ".join(again)] and recorded["completed"] is True
     assert f"`rippleb {' '.join(again)}`" in report.provenance_markdown(
         {"run": recorded, "report": recorded, "seeds_text": "0 (1 seed)"})
+
+
+# --------------------------------------------------------------------------- conditions
+
+def _conditions_rows():
+    """Two conditions; kalman-ripple leads under same-session and trails under re-assembled.
+    Per seed k the errors are base + 0.01 k, so intervals are known in closed form."""
+    rows = []
+    for condition, kalman in (("same-session", 0.2), ("re-assembled", 1.0)):
+        for method, base in (("raw", 2.0), ("order-tracking", 0.5), ("kalman-ripple", kalman)):
+            for scenario, extra in (("paper-quintic", 0.0), ("creep", 0.1)):
+                rows += [{"method": method, "scenario": scenario, "condition": condition, "seed": k,
+                          "rms_error_nm": base + extra + 0.01 * k} for k in range(4)]
+    return rows
+
+
+def test_condition_summary_is_the_mean_over_scenarios_then_over_seeds():
+    table = tables.condition_summary(_frame(_conditions_rows()))
+    cell = table[(table["condition"] == "re-assembled") & (table["method"] == "kalman-ripple")].iloc[0]
+    # per seed: mean of (1.0 + 0.01k) and (1.1 + 0.01k) = 1.05 + 0.01k, k = 0..3
+    assert cell["mean"] == pytest.approx(1.065)
+    assert cell["half"] == pytest.approx(3.182446 * np.std([0, 0.01, 0.02, 0.03], ddof=1) / 2, rel=1e-5)
+    assert (cell["n"], cell["scenarios"]) == (4, 2)
+    assert list(table["condition"].unique()) == ["same-session", "re-assembled"]  # CONDITIONS order
+
+
+def test_headline_says_who_leads_under_which_condition():
+    lines = tables.condition_headline(_frame(_conditions_rows()))
+    assert lines[0].startswith("Under `same-session`, `kalman-ripple` has the lowest mean")
+    assert "ahead of `order-tracking`" in lines[0] and "do not overlap" in lines[0]
+    assert lines[1].startswith("Under `re-assembled`, `order-tracking` has the lowest mean")
+    assert lines[2] == ("The leader depends on the condition: `kalman-ripple` under `same-session`, "
+                        "`order-tracking` under `re-assembled`.")
+
+
+def test_every_table_is_given_per_condition():
+    text = report.tables_markdown(_frame(_conditions_rows()))
+    for condition in ("same-session", "re-assembled"):
+        assert f"## Condition `{condition}`" in text
+        assert f"### `rms_error_nm`: RMS error against torque_true [Nm] ({condition})" in text
+        assert f"### Ranking per scenario by `rms_error_nm` ({condition})" in text
+    assert "| method         | same-session (2 scenarios)   | re-assembled (2 scenarios)   |" in text
+
+
+def test_rows_without_a_condition_column_are_same_session():
+    rows = [{k: v for k, v in r.items() if k != "condition"} for r in _conditions_rows()
+            if r["condition"] == "same-session"]
+    frame = _frame(rows)
+    assert "condition" not in frame
+    assert "## Condition `same-session`" in report.tables_markdown(frame)
+    assert list(tables.condition_summary(frame)["condition"].unique()) == ["same-session"]
+
+
+def test_noisy_timing_cells_are_flagged():
+    rows = [{"method": "raw", "scenario": "creep", "seed": k, "us_per_tick_p50": 2.0,
+             "us_per_tick_p99": p99} for k, p99 in enumerate([5.0, 5.2, 4.9, 5.1])]
+    rows += [{"method": "kalman-ripple", "scenario": "creep", "seed": k, "us_per_tick_p50": 50.0,
+              "us_per_tick_p99": p99} for k, p99 in enumerate([80.0, 1500.0, 90.0, 6000.0])]
+    cells = tables.timing_cells(_frame(rows)).set_index("method")
+    assert not cells.loc["raw", "noisy"] and cells.loc["kalman-ripple", "noisy"]
+    text = tables.timing_markdown(_frame(rows))
+    assert "| raw " in text and "2 / 5.05" in text and "noisy" in text
+
+
+def test_closing_table_of_run_fits_100_columns_with_the_longest_names():
+    rows = [{"method": m, "scenario": s, "condition": "same-session", "seed": k,
+             "rms_error_nm": 0.123 + 0.01 * k, "max_error_nm": 12.3 + k, "us_per_tick_p50": 123.0}
+            for m in ("order-tracking-no-deadzone", "angle-adaptive-frozen") for s in ("static-contact", "paper-quintic")
+            for k in range(3)]
+    rows.append({**rows[0], "seed": 9, "status": "timeout", "message": "killed after 300 s " * 10})
+    text = tables.summary_text(_frame(rows))
+    assert max(len(line) for line in text.splitlines()) <= 100
+    assert text.count("killed") == 10  # a failed row's message is wrapped, not cut
+    assert "0.13 ± 0.025" in text and "Mean ± 95 % interval" in text  # means with intervals, as the report
+
+
+def test_title_says_published_only_when_asked_and_recorded_logs_are_not_simulated():
+    frame = _frame([{"method": "raw", "scenario": "paper-quintic", "seed": 0}])
+    prov = {"run": {}, "report": {"command": "rippleb report"}, "seeds_text": "0 (1 seed)"}
+    trial = report.readme_markdown(frame, prov, {}, run_dir="runs/a")
+    assert trial.startswith("# rippleb report of `runs/a` (simulated devices)") and "do not edit" not in trial
+    published = report.readme_markdown(frame, prov, {}, published=True)
+    assert published.startswith("# rippleb: published comparison") and "do not edit by hand" in published
+    recorded = report.readme_markdown(frame.assign(scenario="log:pq.csv"), prov, {})
+    assert "(recorded log)" in recorded.splitlines()[0]
+    assert "comes from the simulator" not in recorded and "comes from the recorded log" in recorded
+
+
+def test_error_against_speed_is_averaged_over_devices_with_an_interval():
+    one = {"speed": np.array([0.0, 1.0]), "raw": np.array([1.0, 2.0])}
+    two = {"speed": np.array([0.0, 1.0]), "raw": np.array([3.0, 2.0])}
+    table = figures.error_by_speed_over_seeds([one, two])
+    mean, half = table["raw"]
+    np.testing.assert_allclose(mean, [2.0, 2.0])
+    assert half[0] == pytest.approx(12.706205 * np.std([1, 3], ddof=1) / np.sqrt(2)) and half[1] == 0.0
+    assert table["n"] == 2
+
+
+def test_residual_spectrum_shows_the_ripple_a_method_leaves_behind(tmp_path):
+    spectra = figures.residual_spectra(_signals(), max_freq=50.0)
+    raw_f, _ = spectra["raw"]
+    peak = spectra["freq"][1:][np.argmax(raw_f[1:])]
+    assert peak == pytest.approx(8.0, abs=0.5)  # the fake ripple is at 8 Hz
+    tracked_f, _ = spectra["order-tracking"]
+    assert tracked_f.max() < 0.2 * raw_f.max()  # a tenth of the ripple left
+    assert len(spectra["order"]) > 0  # the fake move turns the motor many revolutions one way
+    assert _is_png(figures.plot_residual_spectra(_signals(), tmp_path / "spectra.png"))
+
+
+def test_figures_can_be_written_as_svg_and_pdf(tmp_path):
+    svg = figures.plot_error_vs_speed([_signals()], tmp_path / "speed.svg")
+    assert b"<svg" in svg.read_bytes()[:1000]
+    pdf = figures.plot_ripple_compensation(_signals(), tmp_path / "fig5.pdf")
+    assert pdf.read_bytes()[:5] == b"%PDF-"
+
+
+def test_dashed_motion_lines_are_labelled_in_figs_5_and_6(tmp_path):
+    import matplotlib.pyplot as plt
+
+    figures.plot_ripple_compensation(_signals(), tmp_path / "fig5.png")
+    seen = []
+    original = plt.Figure.savefig
+
+    def spy(fig, *args, **kwargs):
+        seen.append([t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()])
+        return original(fig, *args, **kwargs)
+
+    plt.Figure.savefig = spy
+    try:
+        figures.plot_ripple_compensation(_signals(), tmp_path / "fig5.png")
+        figures.plot_estimates(_signals(), tmp_path / "fig6.png")
+    finally:
+        plt.Figure.savefig = original
+    assert all(figures.MOTION_EDGE_LABEL in labels for labels in seen) and len(seen) == 2
+
+
+def test_the_report_says_how_timing_was_taken():
+    rows = [{"method": "raw", "scenario": "creep", "seed": k, "us_per_tick_p50": 2.0, "us_per_tick_p99": 5.0}
+            for k in range(3)]
+    note = tables.timing_note({"run": {"jobs": 2, "cpu_count": 2}}, _frame(rows))
+    assert "2 rows ran in parallel (`--jobs 2`) on a machine with 2 CPUs; 0 cells are flagged" in note
+    assert "`--jobs 1`" in note  # how to get quiet timings
+    quiet = tables.timing_note({"run": {"jobs": 1, "cpu_count": 8}}, _frame(rows))
+    assert "rows ran one at a time (`--jobs 1`) on a machine with 8 CPUs" in quiet
+    assert "not recorded" in tables.timing_note({"run": {}}, _frame(rows))
+
+
+def test_a_dirty_build_is_told_from_a_dev_version():
+    from rippleb.provenance import built_dirty
+
+    assert not built_dirty("0.1.1.dev79+gf4de4a038")
+    assert built_dirty("0.1.1.dev79+gf4de4a038.d20261122")
+    assert not built_dirty("0.1.0")

@@ -135,6 +135,7 @@ def fake(monkeypatch):
     monkeypatch.setattr(Registry, "discover", classmethod(lambda cls, group="rippleb.methods": discover(group)))
 
 
+@pytest.mark.slow
 def test_misbehaving_methods_get_their_status_and_the_others_complete(fake, tmp_path):
     names = [c.name for c in ALL] + ["raw"]
     frame = rippleb.run(methods=names, scenarios=["paper-quintic"], seeds=2, jobs=3, out=tmp_path,
@@ -208,15 +209,34 @@ def test_resume_refuses_another_selection(fake, tmp_path):
         rippleb.run(methods="raw", scenarios="paper-quintic", seeds=1, seed_start=5, out=tmp_path, resume=True)
 
 
+@pytest.fixture
+def sigint_raises():
+    """Ctrl-C as in a terminal: SIGINT raises KeyboardInterrupt. A process started in the
+    background (a pytest-xdist worker) inherits SIGINT ignored, and an interrupted run
+    would then wait for a blocked method forever."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
-def test_interrupt_keeps_the_finished_rows(fake, tmp_path, signum):
-    # The signal arrives while 'sleeps' blocks the run; the rows before it are on disk.
-    timer = threading.Timer(4.0, signal.raise_signal, (signum,))
-    timer.start()
+def test_interrupt_keeps_the_finished_rows(fake, tmp_path, signum, sigint_raises):
+    # The signal arrives while 'sleeps' blocks the run, once the rows before it are on disk
+    # (waiting for them, not a fixed delay: on a loaded machine they may take longer).
+    def interrupt_after_two_rows():
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            path = tmp_path / "results.csv"
+            if path.is_file() and len(pd.read_csv(path)) >= 2:
+                break
+            time.sleep(0.05)
+        signal.raise_signal(signum)
+
+    threading.Thread(target=interrupt_after_two_rows, daemon=True).start()
     with pytest.raises(KeyboardInterrupt):
         rippleb.run(methods="raw,perfect,sleeps", scenarios="paper-quintic", seeds=1, jobs=1,
                     out=tmp_path, timeout=None)
-    timer.cancel()
     disk = pd.read_csv(tmp_path / "results.csv")
     assert sorted(disk.method) == ["perfect", "raw"] and (disk.status == "ok").all()
 

@@ -138,6 +138,7 @@ def test_tracks_an_acceleration_through_the_bank():
     assert method.centres_[method.band_] == pytest.approx(20.0, rel=0.05)
 
 
+@pytest.mark.slow
 def test_block_size_does_not_change_the_estimate():
     log, _, _ = _ripple_log([0.0, 5.0, 12.0, 1.0], 1.0)
     method = SwitchedNotch()
@@ -176,6 +177,7 @@ def _bands(method, log):
     return np.array(out)
 
 
+@pytest.mark.slow
 def test_conformance():
     testing = pytest.importorskip("rippleb.testing")
     testing.check_method(SwitchedNotch)

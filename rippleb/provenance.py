@@ -1,0 +1,162 @@
+"""Provenance: what code, software and machine produced a run and its report.
+
+``rippleb run`` records :func:`collect_provenance` in ``DIR/provenance.json``; ``rippleb
+report`` adds its own and prints both as a table (:func:`provenance_markdown`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import shlex
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from rippleb.errors import InputError
+
+#: The paths whose changes can move a result; a dirty flag over the whole tree would also
+#: count notes, docs and results/ itself.
+CODE_PATHS = ("rippleb", "methods", "scenarios", "pyproject.toml")
+
+
+def collect_provenance(argv=None) -> dict:
+    """Software, code version and machine, with the command line ``argv`` (without the
+    program name) as ``rippleb ...``; what ``rippleb run`` records when it starts."""
+    import numpy
+    import scipy
+
+    from rippleb import __version__
+    from rippleb.results import system_info
+
+    return {"command": shlex.join(["rippleb", *(sys.argv[1:] if argv is None else argv)]),
+            "cwd": os.getcwd(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "rippleb_version": __version__, **git_state(),
+            "python": platform.python_version(), "numpy": numpy.__version__, "scipy": scipy.__version__,
+            "pinocchio": _pinocchio_version(), "platform": platform.platform(terse=True),
+            "cpu": system_info()["cpu"], "cpu_count": os.cpu_count()}
+
+
+def _pinocchio_version() -> str:
+    try:
+        import pinocchio
+    except Exception as exc:  # the report must still be written without the simulator's dependency
+        return f"not importable ({type(exc).__name__})"
+    return str(pinocchio.__version__)
+
+
+def git_state(root: Path | None = None) -> dict:
+    """``git_commit`` (HEAD), ``git_dirty`` (uncommitted or untracked changes under
+    :data:`CODE_PATHS`) and ``git_dirty_paths`` of the checkout holding rippleb.
+
+    Outside a git checkout (an installed wheel) the commit recorded when the package was
+    built (:func:`build_commit`) is used, with ``git_source = "build"``; ``unknown`` if
+    the package was built without git either.
+    """
+    checkout = Path(root) if root is not None else Path(__file__).resolve().parent.parent
+    try:
+        commit = _git(checkout, "rev-parse", "HEAD").strip()
+        status = _git(checkout, "status", "--porcelain", "--", *CODE_PATHS)
+    except (OSError, subprocess.CalledProcessError):
+        built = build_commit() if root is None else None
+        if built is None:
+            return {"git_commit": "unknown", "git_dirty": "unknown", "git_dirty_paths": []}
+        return {"git_commit": built["commit"], "git_dirty": built["dirty"], "git_dirty_paths": [],
+                "git_source": "build"}
+    paths = [line[3:] for line in status.splitlines() if line.strip()]
+    return {"git_commit": commit, "git_dirty": bool(paths), "git_dirty_paths": paths, "git_source": "checkout"}
+
+
+def build_commit() -> dict | None:
+    """The commit setuptools-scm saw when this package was built (``rippleb/_version.py``):
+    ``{"commit": short hash, "dirty": bool}``, or None if it was built outside git."""
+    try:
+        from rippleb import _version
+    except ImportError:
+        return None
+    commit = getattr(_version, "__commit_id__", None)
+    if not commit:
+        return None
+    return {"commit": str(commit).removeprefix("g"), "dirty": built_dirty(str(_version.__version__))}
+
+
+def built_dirty(version: str) -> bool:
+    """Whether setuptools-scm saw uncommitted changes: it then ends the local version with
+    the date, ``.dYYYYMMDD`` (``0.1.1.dev3+gabc1234.d20261122``)."""
+    import re
+
+    return re.search(r"\.d\d{8}$", version) is not None
+
+
+def _git(root: Path, *args: str) -> str:
+    return subprocess.run(["git", "-C", str(root), *args], check=True, capture_output=True,
+                          text=True, timeout=20).stdout  # not stripped: porcelain lines start with a space
+
+
+def read_run_provenance(run_dir: Path) -> dict:
+    """What ``rippleb run`` recorded in ``DIR/provenance.json`` (empty if the run was made
+    through the Python API), with the selection of ``DIR/run.json``."""
+    out = {}
+    for name in ("run.json", "provenance.json"):
+        path = Path(run_dir) / name
+        if path.is_file():
+            try:
+                out.update(json.loads(path.read_text()))
+            except (OSError, ValueError) as exc:
+                raise InputError(f"{path}: cannot read: {exc}") from None
+    return out
+
+
+def provenance_markdown(prov: dict) -> str:
+    """The provenance section of the README (values as recorded, none typed)."""
+    from rippleb.tables import markdown
+
+    run, rep = prov.get("run", {}), prov["report"]
+    rows = [["command of the run", _code(run.get("command", "not recorded (run made through the Python API)"))],
+            ["resumed with", "; ".join(_code(c) for c in run.get("resumes", [])) or "-"],
+            ["run started", run.get("started", "not recorded")],
+            ["run wall time", f"{run['wall_s']:.0f} s" if "wall_s" in run else "not recorded"],
+            ["jobs (rows run in parallel)", str(run.get("jobs", "not recorded"))],
+            ["CPUs of the run's machine", str(run.get("cpu_count", "not recorded"))],
+            ["seeds", prov["seeds_text"]],
+            ["rippleb", str(run.get("rippleb_version", prov.get("rows_rippleb_version", "not recorded")))],
+            ["git commit of the run", git_text(run)],
+            ["Python", str(run.get("python", prov.get("rows_python", "not recorded")))],
+            ["numpy / scipy / pinocchio", " / ".join(str(run.get(k, "not recorded"))
+                                                    for k in ("numpy", "scipy", "pinocchio"))],
+            ["CPU", str(run.get("cpu", prov.get("rows_cpu", "not recorded")))],
+            ["platform", str(run.get("platform", "not recorded"))],
+            ["command of this report", _code(rep["command"])],
+            ["git commit of this report", git_text(rep)]]
+    return markdown(rows, ["", "value"])
+
+
+def _code(text: str) -> str:
+    return f"`{text}`" if text and not text.startswith("not recorded") else text
+
+
+def git_text(info: dict) -> str:
+    """One line for the commit and dirty state in ``info`` (as :func:`git_state` returns)."""
+    commit = info.get("git_commit")
+    if commit is None:
+        return "not recorded"
+    built = " (recorded when the package was built)" if info.get("git_source") == "build" else ""
+    dirty = info.get("git_dirty")
+    if dirty is True:
+        where = ", ".join(info.get("git_dirty_paths", [])) or "the built tree"
+        return f"{commit}{built} with uncommitted changes in {where}"
+    return f"{commit}{built}" + ("" if dirty is False else " (dirty state unknown)")
+
+
+def seeds_text(seeds) -> str:
+    """``0-19 (20 seeds)`` for a contiguous range, else the list."""
+    seeds = sorted(int(s) for s in set(seeds))
+    if not seeds:
+        return "none"
+    if seeds == list(range(seeds[0], seeds[-1] + 1)):
+        span = f"{seeds[0]}" if len(seeds) == 1 else f"{seeds[0]}-{seeds[-1]}"
+    else:
+        span = ", ".join(map(str, seeds))
+    return f"{span} ({len(seeds)} seed{'s' if len(seeds) != 1 else ''})"

@@ -49,7 +49,7 @@ def test_list_shows_methods_and_scenarios():
     (["simulate", "paper-quintic", "--out", "x.txt"], "unsupported log format"),
     (["report", "missing-dir"], "no results.csv"),
     (["run", "--log", "missing.csv"], "no such file"),
-    (["run", "--resume", "missing-dir"], "cannot resume"),
+    (["run", "--resume", "missing-dir"], "nothing to resume"),
 ])
 def test_errors_are_one_line_exit_2(tmp_path, args, message):
     proc = rippleb(*args, cwd=tmp_path)

@@ -15,6 +15,7 @@ import pytest
 
 import rippleb
 from rippleb import report
+from rippleb.conditions import CONDITIONS
 from rippleb.registry import Registry
 from rippleb.scenario import scored_scenarios
 
@@ -22,10 +23,12 @@ RESULTS = Path(__file__).resolve().parent.parent / "results"
 PUBLISHED = RESULTS / "results.csv"
 MIN_SEEDS = 20
 
-#: (method, scenario, seed): the paper's method and two baselines, on the paper's
-#: trajectory and on restarts, two devices.
-SUBSET = [("order-tracking", "paper-quintic", 0), ("raw", "paper-quintic", 0),
-          ("lowpass", "stop-restart", 1)]
+#: (method, scenario, condition, seed): the paper's method, the new adaptive method and
+#: two baselines, on the paper's trajectory and on restarts, two devices, three conditions.
+SUBSET = [("order-tracking", "paper-quintic", "same-session", 0),
+          ("angle-adaptive", "stop-restart", "power-cycled", 1),
+          ("raw", "paper-quintic", "re-assembled", 0),
+          ("lowpass", "stop-restart", "aged", 1)]
 
 
 def _published() -> pd.DataFrame:
@@ -37,9 +40,9 @@ def _published() -> pd.DataFrame:
 
 def _rerun(tmp_path) -> pd.DataFrame:
     fresh = []
-    for i, (method, scenario, seed) in enumerate(SUBSET):
+    for i, (method, scenario, condition, seed) in enumerate(SUBSET):
         out = tmp_path / f"row{i}"
-        rippleb.run([method], [scenario], [seed], jobs=1, out=out)
+        rippleb.run([method], [scenario], [seed], conditions=[condition], jobs=1, out=out)
         # read back from the CSV the runner wrote, exactly as the published rows were
         fresh.append(report.read_results_exact(out / "results.csv"))
     return pd.concat(fresh, ignore_index=True)
@@ -55,7 +58,7 @@ def test_published_rows_are_reproduced_exactly(tmp_path):
 
 def test_a_tampered_copy_is_detected(tmp_path):
     published = _published()
-    keys = published.set_index(["method", "scenario", "seed"]).index
+    keys = published.set_index(["method", "scenario", "condition", "seed"]).index
     rows = published[keys.isin(SUBSET)]
     assert len(rows) == len(SUBSET), "the published table lacks rows of the checked subset"
     tampered = published.copy()
@@ -70,12 +73,13 @@ def test_a_tampered_copy_is_detected(tmp_path):
     assert report.compare_rows(report.read_results_exact(path), rows) == []
 
 
-def test_published_run_covers_every_builtin_method_and_scored_scenario():
+def test_published_run_covers_every_builtin_method_scored_scenario_and_condition():
     published = _published()
     methods = Registry.discover().names("builtin")
-    seeds = published.groupby(["method", "scenario"])["seed"].nunique()
-    short = [f"{m} / {s}: {seeds.get((m, s), 0)} seeds"
-             for m in methods for s in scored_scenarios() if seeds.get((m, s), 0) < MIN_SEEDS]
+    seeds = published.groupby(["method", "scenario", "condition"])["seed"].nunique()
+    short = [f"{m} / {s} / {c}: {seeds.get((m, s, c), 0)} seeds"
+             for m in methods for s in scored_scenarios() for c in CONDITIONS
+             if seeds.get((m, s, c), 0) < MIN_SEEDS]
     assert not short, f"the published run needs at least {MIN_SEEDS} seeds of each:\n" + "\n".join(short)
 
 

@@ -18,7 +18,7 @@ Two mechanisms handle the stops the paper calls the *dead zone*:
 
 ``order-tracking-no-deadzone`` holds the last filtered value during stops;
 ``order-tracking-no-backprop`` restarts the filter after each stop in steady state on
-the first new sample (the best naive state, DESIGN.md). Everything else is shared.
+the first new sample (the best naive state, docs/design.md). Everything else is shared.
 
 See ``docs/methods/order-tracking.md`` for every parameter and how it was chosen.
 """

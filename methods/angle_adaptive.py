@@ -293,9 +293,13 @@ class AngleAdaptive(Method):
         self.w_ = weights[-1]
         if len(weights) == 1:
             return y - ripple(phi, y, self.w_)
-        # the map each sample sees: the latest one solved at or before it
-        which = np.searchsorted(np.asarray(starts), np.arange(len(strain)), side="right")
-        return y - ripple(phi, y, np.asarray(weights)[which])
+        # each sample sees the latest map solved at or before it: one product per map
+        rows = map_rows(phi, y)
+        out = np.empty(len(strain))
+        bounds = [0] + [min(max(b, 0), len(strain)) for b in starts] + [len(strain)]
+        for w, lo, hi in zip(weights, bounds[:-1], bounds[1:]):
+            out[lo:hi] = y[lo:hi] - rows[lo:hi] @ w
+        return out
 
     def _learn(self, strain, encoder):
         """Fold whole update periods of ticks into the information; the map after each.
@@ -346,7 +350,7 @@ class AngleAdaptive(Method):
         was learned in) has a wide gate. Forgetting runs on revolutions whether ticks pass
         or not, so a map the gate has locked out widens its own gate again.
         """
-        spread = self.r_ + np.einsum("ij,jk,ik->i", psi, self.cov_, psi)
+        spread = self.r_ + np.sum((psi @ self.cov_) * psi, axis=1)
         return (z - psi @ self.w_) ** 2 <= self.outlier_gate ** 2 * spread
 
     def _differences(self, phi, ybar, end):

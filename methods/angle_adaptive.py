@@ -15,8 +15,8 @@ angle, whatever the torque does.
 
 The coefficients ``w = [c0, c1, c2]`` are adapted online by recursive least squares with
 **stabilised forgetting** (Kulhavy & Zarrop 1993; the generalised-forgetting RLS of Lai &
-Bernstein 2023 covers it): the information matrix forgets towards a floor ``delta I`` about
-the calibration map instead of towards zero, so it stays invertible in directions the motion
+Bernstein 2023 covers it): the information matrix forgets towards a floor about the
+calibration map instead of towards zero, so it stays invertible in directions the motion
 does not excite and the estimate cannot wind up. Forgetting is per *revolution* of the wave
 generator, not per second, and a tick enters the fit only if the encoder moved by at least
 ``min_counts`` in it: at rest nothing is learned and nothing is forgotten. The unknown torque
@@ -24,9 +24,11 @@ is removed from the fit by second differences of consecutive control ticks (tick
 
     y_j - 2 y_{j-1} + y_{j-2} = d2 tau_j + d2 phi_j . (c0 + c1 y_{j-2} + c2 |y_{j-2}|)
 
-the torque's second difference over two ticks is the equation error. The map is warm-started from the calibration log and referred to the encoder's
-index pulse when the logs have one (re-homing after a power cycle). See
-``docs/methods/angle-adaptive.md`` for the design, the sources and the measurements.
+the torque's second difference over two ticks is the equation error; an innovation gate
+keeps unknown torque steps out. The map is warm-started from the calibration log and
+referred to the encoder's index pulse when the logs have one (re-homing after a power
+cycle). See ``docs/methods/angle-adaptive.md`` for the design, the sources and the
+measurements.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ import numpy as np
 
 from rippleb.data import JointSpec, SensorBlock, SensorLog
 from rippleb.method import Method
+
 
 def phasor_table(counts_per_rev: int) -> np.ndarray:
     """``exp(2j pi n / counts_per_rev)`` for every encoder position ``n`` (exact per count)."""
@@ -206,7 +209,6 @@ class AngleAdaptive(Method):
         self.history_ = None            # the last two complete ticks: (phi, y, end count)
         self.pending_ = (np.empty(0), np.empty(0, dtype=np.int64))
         self.ticks_done_ = 0
-        self.samples_ = 0
 
     def step(self, block: SensorBlock) -> np.ndarray:
         """One torque estimate [Nm] per sample: the strain minus the current map."""
@@ -286,15 +288,18 @@ class AngleAdaptive(Method):
         elif done:
             self.ticks_done_ += done
         self.pending_ = (all_strain[done * D:], all_encoder[done * D:])
-        self.samples_ += len(strain)
         y = self.gain_ * strain + self.offset_
         phi = angle_regressors(encoder - self.frame_, self.orders_, self.table_)
         self.w_ = weights[-1]
         if len(weights) == 1:
             return y - ripple(phi, y, self.w_)
-        # the map each sample sees: the latest one solved at or before it
-        which = np.searchsorted(np.asarray(starts), np.arange(len(strain)), side="right")
-        return y - ripple(phi, y, np.asarray(weights)[which])
+        # each sample sees the latest map solved at or before it: one product per map
+        rows = map_rows(phi, y)
+        out = np.empty(len(strain))
+        bounds = [0] + [min(max(b, 0), len(strain)) for b in starts] + [len(strain)]
+        for w, lo, hi in zip(weights, bounds[:-1], bounds[1:]):
+            out[lo:hi] = y[lo:hi] - rows[lo:hi] @ w
+        return out
 
     def _learn(self, strain, encoder):
         """Fold whole update periods of ticks into the information; the map after each.
@@ -345,7 +350,7 @@ class AngleAdaptive(Method):
         was learned in) has a wide gate. Forgetting runs on revolutions whether ticks pass
         or not, so a map the gate has locked out widens its own gate again.
         """
-        spread = self.r_ + np.einsum("ij,jk,ik->i", psi, self.cov_, psi)
+        spread = self.r_ + np.sum((psi @ self.cov_) * psi, axis=1)
         return (z - psi @ self.w_) ** 2 <= self.outlier_gate ** 2 * spread
 
     def _differences(self, phi, ybar, end):

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from rippleb.data import JointSpec, make_log
 from rippleb.methods.angle_adaptive import (AngleAdaptive, AngleAdaptiveFrozen, angle_regressors,
                                             map_rows, phasor_table, ripple, rotation)
-from rippleb.testing import check_method, default_logs, slice_log
+from rippleb.testing import check_method, default_logs
 
 ORDERS = np.array([1, 2, 4, 6, 8])
 SPEC = JointSpec()

@@ -48,7 +48,7 @@ from rippleb.files import atomic_path
 from rippleb.metrics import Truth, score, tick_stats
 from rippleb.pool import Pool
 from rippleb.registry import Registry
-from rippleb.results import ENVIRONMENT, STATUSES, ResultsFile, RunWarning, system_info
+from rippleb.results import ENVIRONMENT, STATUSES, ResultsFile, RunWarning, row_key, system_info
 from rippleb.rows import (CALIBRATION, FITTING, SCORED, Case, RowKey, check_trajectory, scenario_hash,
                           select_conditions, select_scenarios, split_names)
 
@@ -65,7 +65,7 @@ MIN_CALIBRATION_S = 1.0
 def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, seed_start: int = 0,
         jobs: int = 1, out=None, timeout: float | None = DEFAULT_TIMEOUT_S,
         memory_mb: float | None = DEFAULT_MEMORY_MB, resume: bool = False, progress: bool | None = False,
-        on_start=None):
+        on_start=None, executor=None):
     """Run methods on simulated scenarios; one row per method x scenario x condition x seed.
 
     Parameters
@@ -98,6 +98,9 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, s
         Show a progress bar on stderr (None: only on a terminal).
     on_start
         Called once the run directory is checked and locked, before any job starts.
+    executor
+        None for the local forked pool, or an object with ``run(tasks, record)`` that runs
+        whole rows elsewhere (:class:`rippleb.dask_executor.DaskExecutor`).
 
     Returns
     -------
@@ -119,23 +122,41 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, s
     condition_list = select_conditions(conditions)
     seed_list = _seed_list(seeds, seed_start)
     calibration = load_scenario(CALIBRATION)
-    plan = _Plan(calibration_label=CALIBRATION)
-    cal_content = scenario_hash(calibration)
-    for seed in seed_list:
-        cal_case = Case(CALIBRATION, cal_content, DEFAULT_CONDITION, seed, FITTING)
-        plan.add_sim(calibration, cal_case)
-        for scenario in scenario_objs:
-            content = scenario_hash(scenario)
-            for condition in condition_list:
-                case = Case(scenario.name, content, condition, seed, SCORED)
-                plan.add_sim(scenario, case)
-                for method in names:
-                    plan.add_row(RowKey(method, scenario.name, condition, seed), case, cal_case)
     config = {"methods": names, "conditions": condition_list, "seeds": seed_list,
               "scenarios": [str(Path(s).resolve()) if s.endswith(".toml") else s for s in
                             dict.fromkeys(given)]}
+    return run_resolved(registry, names, [(s, calibration, {}) for s in scenario_objs], condition_list,
+                        seed_list, config=config, jobs=jobs, out=out, timeout=timeout,
+                        memory_mb=memory_mb, resume=resume, progress=progress, on_start=on_start,
+                        executor=executor)
+
+
+def run_resolved(registry: Registry, names: list[str], entries: list[tuple], conditions: list[str],
+                 seeds: list[int], *, config: dict, jobs: int = 1, out=None,
+                 timeout: float | None = DEFAULT_TIMEOUT_S, memory_mb: float | None = DEFAULT_MEMORY_MB,
+                 resume: bool = False, progress: bool | None = False, on_start=None, executor=None):
+    """Run checked selections: ``entries`` holds ``(scenario, calibration scenario, extra key
+    columns)`` triples of resolved :class:`~rippleb.scenario.Scenario` objects.
+
+    The extra columns (``{name: value}``, e.g. the swept values of :mod:`rippleb.sweep`)
+    become part of each row's key and columns, so two entries that share a scenario name
+    never share a row; their scenario content (hashed into every cache file name)
+    differs. The options are those of :func:`run`; ``config`` is saved in ``run.json``.
+    """
+    plan = _Plan(calibration_label=CALIBRATION)
+    for seed in seeds:
+        for scenario, calibration, extra in entries:
+            cal_case = Case(CALIBRATION, scenario_hash(calibration), DEFAULT_CONDITION, seed, FITTING)
+            plan.add_sim(calibration, cal_case)
+            content = scenario_hash(scenario)
+            for condition in conditions:
+                case = Case(scenario.name, content, condition, seed, SCORED)
+                plan.add_sim(scenario, case)
+                for method in names:
+                    key = RowKey(method, scenario.name, condition, seed, tuple(extra.items()))
+                    plan.add_row(key, case, cal_case)
     return _execute(registry, plan, out=out, jobs=jobs, timeout=timeout, memory_mb=memory_mb,
-                    resume=resume, progress=progress, config=config, on_start=on_start)
+                    resume=resume, progress=progress, config=config, on_start=on_start, executor=executor)
 
 
 def run_log(log, calibration=None, methods=None, *, jobs: int = 1, out=None,
@@ -300,7 +321,7 @@ class _State:
 
 
 def _execute(registry, plan: _Plan, *, out, jobs, timeout, memory_mb, resume, progress, config,
-             on_start=None):
+             on_start=None, executor=None):
     with _run_dir(out, resume, config) as out_dir:
         if on_start is not None:
             on_start()
@@ -308,13 +329,18 @@ def _execute(registry, plan: _Plan, *, out, jobs, timeout, memory_mb, resume, pr
         if resume:
             _say_retried(results.drop_environmental(), out_dir)
         done = results.done_keys()
-        rows = sorted(k for k in plan.rows if (k.method, k.scenario, k.condition, k.seed) not in done)
+        rows = sorted(k for k in plan.rows if row_key(k.fields()) not in done)
         with tempfile.TemporaryDirectory(prefix="rippleb-cache-") as cache:
             state = _State(plan, registry, results, Path(cache), _log_dir(out_dir), timeout,
                            time.strftime("%Y%m%dT%H%M%S"), rows)
-            _prepare_cases(state)
             with _progress(len(rows), progress) as bar, _sigterm_as_interrupt():
-                _schedule(Pool(int(jobs), memory_mb), state, bar)
+                if executor is None:
+                    _prepare_cases(state)
+                    _schedule(Pool(int(jobs), memory_mb), state, bar)
+                else:  # whole rows run elsewhere; this process only records them
+                    _count_open_rows(state)
+                    executor.run(_row_tasks(state, memory_mb),
+                                 lambda key, fields: _record(state, key, bar, **fields))
         results.flush()
     return results.frame()
 
@@ -338,9 +364,36 @@ def _prepare_cases(state: _State) -> None:
             state.lengths[case] = _lengths(log)
     state.sims = {_sim_key(c): "pending" for c in needed if c not in state.plan.ready}
     state.fits = {_Fit(k.method, state.plan.rows[k][1]): "pending" for k in state.pending}
+    _count_open_rows(state)
+
+
+def _count_open_rows(state: _State) -> None:
     for key in state.pending:
         case = state.plan.rows[key][0]
         state.open_rows[case] = state.open_rows.get(case, 0) + 1
+
+
+def _row_tasks(state: _State, memory_mb) -> list:
+    """What an executor needs to run each pending row anywhere: the scenarios themselves
+    (nothing read from this machine's files), the key, and the limits."""
+    tasks = []
+    for key in state.pending:
+        case, cal_case = state.plan.rows[key]
+        tasks.append(RowTask(key, state.plan.sims[_sim_key(case)][0], state.plan.sims[_sim_key(cal_case)][0],
+                             state.timeout, memory_mb, state.run_id))
+    return tasks
+
+
+@dataclass(frozen=True)
+class RowTask:
+    """One row as a self-contained task: an executor recomputes its simulations from the seed."""
+
+    key: RowKey
+    scenario: object
+    calibration: object
+    timeout: float | None
+    memory_mb: float | None
+    run_id: str
 
 
 def _lengths(log: SensorLog) -> tuple[int, int]:
@@ -516,9 +569,9 @@ def _record(state: _State, key: RowKey, bar, **fields) -> None:
     if key in state.pending:
         state.pending.remove(key)
     case, cal_case = state.plan.rows[key]
-    row = {"method": key.method, "scenario": key.scenario, "condition": key.condition, "seed": key.seed,
-           **fields, "calibration": state.plan.calibration_label, "scenario_sha256": case.content,
-           **system_info(), "run_id": state.run_id}
+    # An executor's fields may carry the system information of the machine that ran the row.
+    row = {**system_info(), **key.fields(), **fields, "calibration": state.plan.calibration_label,
+           "scenario_sha256": case.content, "run_id": state.run_id}
     state.results.add(row)
     bar.update()
     # The truth of a case is kept only while rows of it are open.
@@ -594,7 +647,7 @@ def _locked(out: Path):
 def _check_resume(out: Path, config: dict) -> None:
     saved = read_config(out)
     saved.setdefault("conditions", [DEFAULT_CONDITION])
-    differ = [name for name in ("methods", "scenarios", "conditions", "seeds", "log")
+    differ = [name for name in ("methods", "scenarios", "conditions", "seeds", "log", "sweep")
               if saved.get(name) != config.get(name)]
     if differ:
         name = differ[0]

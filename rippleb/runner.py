@@ -384,6 +384,61 @@ def _row_tasks(state: _State, memory_mb) -> list:
     return tasks
 
 
+def run_task(task: "RowTask", cache: Path, registry: Registry, memo: dict | None = None) -> dict:
+    """Run one row here, exactly as a local run does (same pool, isolation, limits, scoring).
+
+    For an executor's worker: the row's simulations are recomputed from its seed (or taken
+    from ``memo``, which this call also fills: ``Case -> (artefact, truth, lengths)`` and
+    ``_Fit -> fit info``, valid while their files in ``cache`` exist). Returns the row's
+    fields without its key columns, with the system information of this machine.
+    """
+    key = task.key
+    cal_case = Case(CALIBRATION, scenario_hash(task.calibration), DEFAULT_CONDITION, key.seed, FITTING)
+    case = Case(key.scenario, scenario_hash(task.scenario), key.condition, key.seed, SCORED)
+    plan = _Plan(calibration_label=CALIBRATION)
+    plan.add_sim(task.calibration, cal_case)
+    plan.add_sim(task.scenario, case)
+    plan.add_row(key, case, cal_case)
+    state = _State(plan, registry, ResultsFile(None), Path(cache), None, task.timeout, task.run_id, [key])
+    _prepare_cases(state)
+    state.open_rows[case] += 1  # keep the truth after the row is recorded, for the memo
+    memo = {} if memo is None else memo
+    _restore(state, memo, case, cal_case)
+    _schedule(Pool(1, task.memory_mb), state, _NoBar())
+    for c in (case, cal_case):
+        if c in state.artefacts and (c.role == FITTING or c in state.truths):
+            memo[c] = (state.artefacts[c], state.truths.get(c), state.lengths.get(c))
+    for fit, info in state.fits.items():
+        if isinstance(info, dict) and info.get("status") == "ok" and isinstance(info.get("fitted"), dict):
+            memo[fit] = info
+    row = state.results.rows[0]
+    return {k: v for k, v in row.items() if k not in key.fields() and k not in ("calibration", "run_id")}
+
+
+def _restore(state: _State, memo: dict, *cases: Case) -> None:
+    """Take simulations and fits an earlier row of this process left (files checked by hash on use)."""
+    for sim, (_, roles) in state.plan.sims.items():
+        known = [memo.get(Case(*sim, role)) for role in roles]
+        if all(k is not None and Path(k[0].path).is_file() for k in known):
+            for role, (artefact, truth, lengths) in zip(roles, known):
+                c = Case(*sim, role)
+                state.artefacts[c] = artefact
+                if truth is not None:
+                    state.truths[c] = truth
+                if lengths is not None:
+                    state.lengths[c] = lengths
+            state.sims[sim] = "done"
+    for fit in state.fits:
+        info = memo.get(fit)
+        if info is not None and Path(info["fitted"]["path"]).is_file():
+            state.fits[fit] = info
+
+
+class _NoBar:
+    def update(self, n: int = 1) -> None:
+        pass
+
+
 @dataclass(frozen=True)
 class RowTask:
     """One row as a self-contained task: an executor recomputes its simulations from the seed."""

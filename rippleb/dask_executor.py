@@ -1,0 +1,218 @@
+"""Rows on a ``dask.distributed`` cluster (``--scheduler ADDRESS`` or ``--executor dask``).
+
+The client (the ``rippleb`` process) submits one task per row and records each row as it
+comes back, in the same :class:`rippleb.results.ResultsFile` as a local run: it alone
+writes ``results.csv`` (atomically), so Ctrl-C, ``--resume`` and ``rippleb report`` work
+unchanged. What is in flight is bounded (:data:`IN_FLIGHT_PER_THREAD` tasks per worker
+thread, topped up as rows finish), so a 64 000-row sweep never floods the scheduler.
+
+A task carries everything its row needs (:class:`rippleb.runner.RowTask`: the scenario
+objects, the key, the limits) and nothing from the client's disk: the worker recomputes
+the row's simulations from the seed (the simulator is deterministic, so the accuracy
+columns are bit for bit those of a local run) and runs the row with
+:func:`rippleb.runner.run_task`, i.e. with the local run's own pool: the method's fit and
+steps run in their own isolated process (session, PID namespace, memory limit, timeout),
+never see the truth, and a crash is the row's status. Scoring happens in the task's
+process (rippleb's code). Simulations and fits are kept per worker process in a private
+temporary directory (:data:`MEMO_CASES` cases at most), so the rows of one case that land
+on one worker simulate it once.
+
+A worker that dies mid-row loses no row: the scheduler runs its task again elsewhere; a
+task that has killed ``distributed.scheduler.allowed-failures`` workers comes back as an
+``error`` row naming the last worker lost, marked environmental so ``--resume`` runs it
+again.
+"""
+
+from __future__ import annotations
+
+import atexit
+import collections
+import contextlib
+import functools
+import shutil
+import tempfile
+import threading
+import time
+import uuid
+
+from rippleb.errors import InputError
+from rippleb.results import ENVIRONMENT
+
+IN_FLIGHT_PER_THREAD = 2
+MEMO_CASES = 16
+CONNECT_TIMEOUT_S = 30
+THREADS_REFRESH_S = 2.0
+
+
+class DaskExecutor:
+    """Run whole rows on a dask.distributed cluster.
+
+    Parameters
+    ----------
+    scheduler
+        Address of a running scheduler (``tcp://host:8786``), or None to start a
+        ``LocalCluster`` for the run (processes, one thread each).
+    workers
+        Worker processes of the local cluster (ignored with ``scheduler``).
+    """
+
+    def __init__(self, scheduler: str | None = None, workers: int = 1):
+        self.scheduler = scheduler
+        self.workers = workers
+
+    def run(self, tasks: list, record) -> None:
+        """Run ``tasks`` (:class:`rippleb.runner.RowTask`); call ``record(key, fields)`` in
+        this process for each row as it finishes."""
+        if not tasks:
+            return
+        with self._client() as client:
+            _stream(client, tasks, record)
+
+    @contextlib.contextmanager
+    def _client(self):
+        from distributed import Client, LocalCluster
+
+        if self.scheduler is None:
+            with LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                              dashboard_address=":0") as cluster, Client(cluster) as client:
+                yield client
+            return
+        try:
+            client = Client(self.scheduler, timeout=CONNECT_TIMEOUT_S)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise InputError(f"--scheduler {self.scheduler}: cannot connect ({type(exc).__name__}: "
+                             f"{str(exc).splitlines()[0] if str(exc) else 'no answer'})") from None
+        with client:
+            yield client
+
+
+def _stream(client, tasks: list, record) -> None:
+    from distributed import as_completed
+
+    waiting = collections.deque(tasks)
+    in_flight: dict = {}
+    stream = as_completed()
+    limit = _Limit(client)
+
+    def top_up():
+        while waiting and len(in_flight) < limit():
+            task = waiting.popleft()
+            future = client.submit(remote_row, task, key=f"rippleb-row-{uuid.uuid4().hex}", pure=False)
+            in_flight[future] = task
+            stream.add(future)
+    try:
+        top_up()
+        for future in stream:
+            task = in_flight.pop(future)
+            record(task.key, _fields(future))
+            future.release()
+            top_up()
+    finally:
+        if in_flight:  # Ctrl-C or an error: the rows not recorded are left to --resume
+            client.cancel(list(in_flight))
+
+
+class _Limit:
+    """Tasks allowed in flight: twice the cluster's worker threads, re-read now and then
+    (workers may join or leave during a run)."""
+
+    def __init__(self, client):
+        self.client = client
+        self.value, self.read_at = 0, -1e9
+
+    def __call__(self) -> int:
+        if time.monotonic() - self.read_at > THREADS_REFRESH_S:
+            threads = sum(self.client.nthreads().values())
+            self.value = IN_FLIGHT_PER_THREAD * max(1, threads)
+            self.read_at = time.monotonic()
+        return self.value
+
+
+def _fields(future) -> dict:
+    """The row's fields, or the reason the cluster could not produce them (one line)."""
+    from distributed import KilledWorker
+
+    if future.status == "finished":
+        return future.result()
+    if future.status == "cancelled":
+        return {"status": "error", "message": f"{ENVIRONMENT}the cluster cancelled the row's task "
+                                              f"(scheduler lost?)"}
+    exc = future.exception()
+    if isinstance(exc, KilledWorker):
+        return {"status": "error", "message": f"{ENVIRONMENT}dask worker lost: {_one_line(exc)}"[:500]}
+    return {"status": "error", "message": f"dask task failed: {_one_line(exc)}"[:500]}
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+# ----------------------------------------------------------------------------- on the worker
+
+_memo_lock = threading.Lock()
+_memo: collections.OrderedDict = collections.OrderedDict()
+_memo_root: list = []
+
+
+def remote_row(task) -> dict:
+    """The task run on a worker: one row, as :func:`rippleb.runner.run_task` runs it.
+
+    :class:`rippleb.pool.Pool` starts each job with ``os.fork``, not ``multiprocessing``:
+    a dask worker process is *daemonic* (its nanny starts it with ``daemon=True``) and
+    ``multiprocessing.Process.start`` refuses children of a daemonic process ("daemonic
+    processes are not allowed to have children"), but that check is multiprocessing's
+    own; a plain fork is not subject to it, and the pool's keeper then reaps and kills
+    everything the row started, as locally. The forked keeper is single-threaded (only
+    the forking thread survives a fork), which its PID namespace needs.
+    """
+    from rippleb.runner import run_task
+
+    cache = _task_dir()
+    with _memo_lock:
+        memo = dict(_memo)
+    try:
+        fields = run_task(task, cache, _registry(), memo)
+    finally:
+        with _memo_lock:
+            _remember(memo)
+    return fields
+
+
+@functools.lru_cache(maxsize=1)
+def _registry():
+    """The methods this worker can load (its own environment's entry points), found once."""
+    from rippleb.registry import Registry
+
+    return Registry.discover()
+
+
+def _task_dir():
+    """A fresh directory for one task's files, under this process's private root."""
+    from pathlib import Path
+
+    with _memo_lock:
+        if not _memo_root:
+            root = tempfile.mkdtemp(prefix="rippleb-worker-")
+            atexit.register(shutil.rmtree, root, ignore_errors=True)
+            _memo_root.append(root)
+    path = Path(_memo_root[0]) / uuid.uuid4().hex
+    path.mkdir()
+    return path
+
+
+def _remember(memo: dict) -> None:
+    """Keep the newest :data:`MEMO_CASES` cases (and the fits on them); delete the rest's files."""
+    import os
+
+    for key, value in memo.items():
+        _memo[key] = value
+        _memo.move_to_end(key)
+    cases = [k for k in _memo if hasattr(k, "role")]
+    for old in cases[:max(0, len(cases) - MEMO_CASES)]:
+        artefact = _memo.pop(old)[0]
+        with contextlib.suppress(OSError):
+            os.unlink(artefact.path)
+        for fit in [k for k in _memo if getattr(k, "calibration", None) == old]:
+            with contextlib.suppress(OSError):
+                os.unlink(_memo.pop(fit)["fitted"]["path"])

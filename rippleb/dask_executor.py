@@ -93,11 +93,12 @@ def _stream(client, tasks: list, record) -> None:
     in_flight: dict = {}
     stream = as_completed()
     limit = _Limit(client)
+    blas = openblas_threads()
 
     def top_up():
         while waiting and len(in_flight) < limit():
             task = waiting.popleft()
-            future = client.submit(remote_row, task, key=f"rippleb-row-{uuid.uuid4().hex}", pure=False)
+            future = client.submit(remote_row, task, blas, key=f"rippleb-row-{uuid.uuid4().hex}", pure=False)
             in_flight[future] = task
             stream.add(future)
     try:
@@ -155,8 +156,14 @@ _memo: collections.OrderedDict = collections.OrderedDict()
 _memo_root: list = []
 
 
-def remote_row(task) -> dict:
+def remote_row(task, blas_threads: int | None = None) -> dict:
     """The task run on a worker: one row, as :func:`rippleb.runner.run_task` runs it.
+
+    ``blas_threads`` is the client's OpenBLAS thread count: dask's nanny starts workers
+    with ``OPENBLAS_NUM_THREADS=1`` (``distributed.nanny.pre-spawn-environ``), and a BLAS
+    call split over another number of threads sums in another order, so a method using
+    BLAS would differ from a local run in its last bits. The worker takes the client's
+    count (the row's forked processes inherit it).
 
     :class:`rippleb.pool.Pool` starts each job with ``os.fork``, not ``multiprocessing``:
     a dask worker process is *daemonic* (its nanny starts it with ``daemon=True``) and
@@ -168,6 +175,8 @@ def remote_row(task) -> dict:
     """
     from rippleb.runner import run_task
 
+    if blas_threads:
+        openblas_threads(blas_threads)
     cache = _task_dir()
     with _memo_lock:
         memo = dict(_memo)
@@ -216,3 +225,40 @@ def _remember(memo: dict) -> None:
         for fit in [k for k in _memo if getattr(k, "calibration", None) == old]:
             with contextlib.suppress(OSError):
                 os.unlink(_memo.pop(fit)["fitted"]["path"])
+
+
+def openblas_threads(set_to: int | None = None) -> int | None:
+    """The thread count of the OpenBLAS libraries numpy and scipy loaded (None if none),
+    after setting it to ``set_to`` if given (as threadpoolctl does, without the dependency)."""
+    import ctypes
+
+    import numpy  # noqa: F401 - load both BLAS libraries before reading or setting them
+    import scipy.linalg  # noqa: F401
+
+    counts = []
+    for path in _loaded_openblas():
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for suffix in ("64_", ""):
+            getter = getattr(lib, f"scipy_openblas_get_num_threads{suffix}", None) \
+                or getattr(lib, f"openblas_get_num_threads{suffix}", None)
+            setter = getattr(lib, f"scipy_openblas_set_num_threads{suffix}", None) \
+                or getattr(lib, f"openblas_set_num_threads{suffix}", None)
+            if getter is None or setter is None:
+                continue
+            if set_to is not None:
+                setter(ctypes.c_int(int(set_to)))
+            counts.append(int(getter()))
+            break
+    return max(counts) if counts else None
+
+
+def _loaded_openblas() -> list[str]:
+    try:
+        with open("/proc/self/maps") as fh:
+            paths = {line.split()[-1] for line in fh if "/" in line}
+    except OSError:
+        return []
+    return sorted(p for p in paths if "openblas" in p.rsplit("/", 1)[-1].lower())

@@ -3,6 +3,7 @@
 The public API is re-exported here; see the README for the CLI.
 """
 
+from rippleb.conditions import CONDITIONS, DEFAULT_CONDITION
 from rippleb.data import JointSpec, SensorBlock, SensorLog, make_log, read_log, write_log
 from rippleb.errors import InputError, PluginError, RipplebError
 from rippleb.method import Method
@@ -13,6 +14,8 @@ from rippleb.simulator import Simulation, simulate
 __version__ = "0.1.0"
 
 __all__ = [
+    "CONDITIONS",
+    "DEFAULT_CONDITION",
     "InputError",
     "JointSpec",
     "Method",

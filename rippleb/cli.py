@@ -225,10 +225,9 @@ def _add_report(sub) -> None:
 
 def cmd_list(args) -> int:
     """``rippleb list``."""
+    from rippleb.conditions import CONDITIONS
     from rippleb.registry import Registry
     from rippleb.scenario import builtin_scenarios, load_scenario
-
-    from rippleb.conditions import CONDITIONS
 
     registry = Registry.discover()
     timeout = _limit("--import-timeout", args.import_timeout) or None

@@ -6,11 +6,11 @@ writes ``results.csv`` (atomically), so Ctrl-C, ``--resume`` and ``rippleb repor
 unchanged. What is in flight is bounded (:data:`IN_FLIGHT_PER_THREAD` tasks per worker
 thread, topped up as rows finish), so a 64 000-row sweep never floods the scheduler.
 
-A task carries everything its row needs (:class:`rippleb.runner.RowTask`: the scenario
+A task carries everything its row needs (:class:`rippleb.executors.RowTask`: the scenario
 objects, the key, the limits) and nothing from the client's disk: the worker recomputes
 the row's simulations from the seed (the simulator is deterministic, so the accuracy
 columns are bit for bit those of a local run) and runs the row with
-:func:`rippleb.runner.run_task`, i.e. with the local run's own pool: the method's fit and
+:func:`rippleb.executors.run_task`, i.e. with the local run's own pool: the method's fit and
 steps run in their own isolated process (session, PID namespace, memory limit, timeout),
 never see the truth, and a crash is the row's status. Scoring happens in the task's
 process (rippleb's code). Simulations and fits are kept per worker process in a private
@@ -61,7 +61,7 @@ class DaskExecutor:
         self.workers = workers
 
     def run(self, tasks: list, record) -> None:
-        """Run ``tasks`` (:class:`rippleb.runner.RowTask`); call ``record(key, fields)`` in
+        """Run ``tasks`` (:class:`rippleb.executors.RowTask`); call ``record(key, fields)`` in
         this process for each row as it finishes."""
         if not tasks:
             return
@@ -157,7 +157,7 @@ _memo_root: list = []
 
 
 def remote_row(task, blas_threads: int | None = None) -> dict:
-    """The task run on a worker: one row, as :func:`rippleb.runner.run_task` runs it.
+    """The task run on a worker: one row, as :func:`rippleb.executors.run_task` runs it.
 
     ``blas_threads`` is the client's OpenBLAS thread count: dask's nanny starts workers
     with ``OPENBLAS_NUM_THREADS=1`` (``distributed.nanny.pre-spawn-environ``), and a BLAS
@@ -173,7 +173,7 @@ def remote_row(task, blas_threads: int | None = None) -> dict:
     everything the row started, as locally. The forked keeper is single-threaded (only
     the forking thread survives a fork), which its PID namespace needs.
     """
-    from rippleb.runner import run_task
+    from rippleb.executors import run_task
 
     if blas_threads:
         openblas_threads(blas_threads)

@@ -175,13 +175,14 @@ def run_sweep(params, methods=None, scenarios=None, seeds=None, *, conditions=No
         column per swept parameter, named after it.
     """
     from rippleb import runner
+    from rippleb.checks import check_options, check_scenario
     from rippleb.registry import Registry
     from rippleb.results import KEY_COLUMNS
     from rippleb.rows import CALIBRATION, select_conditions, select_scenarios, split_names
     from rippleb.scenario import load_scenario, scored_scenarios
 
     sweeps = parse_params(_specs(params))
-    runner.check_options(jobs=options.get("jobs", 1), timeout=options.get("timeout", runner.DEFAULT_TIMEOUT_S),
+    check_options(jobs=options.get("jobs", 1), timeout=options.get("timeout", runner.DEFAULT_TIMEOUT_S),
                          memory_mb=options.get("memory_mb", runner.DEFAULT_MEMORY_MB))
     registry = Registry.discover()
     names = runner.resolve_methods(registry, methods)
@@ -195,7 +196,7 @@ def run_sweep(params, methods=None, scenarios=None, seeds=None, *, conditions=No
         calibration = swept_scenario(CALIBRATION, device)
         for scenario in chosen:
             swept = swept_scenario(scenario.path, point)
-            runner.check_scenario(swept)
+            check_scenario(swept)
             entries.append((swept, calibration, point))
     condition_list = select_conditions(conditions)
     seed_list = runner._seed_list(runner.DEFAULT_SEEDS if seeds is None else seeds, seed_start)

@@ -110,7 +110,7 @@ def test_sigint_then_resume(tmp_path):
         time.sleep(0.05)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 130 and "interrupted" in err
+    assert proc.returncode == 130 and "interrupted" in err, (proc.returncode, err)
     kept = pd.read_csv(out / "results.csv")
     assert 2 <= len(kept) < 18 and (kept.status == "ok").all()
 

@@ -26,7 +26,18 @@ HOSTILE = textwrap.dedent('''
     from rippleb import Method
 
     def _cache_files():
-        return glob.glob(os.path.join(tempfile.gettempdir(), "rippleb-cache-*", "*"))
+        """Every cache file a plugin could find: the temporary directory, the run directory
+        below the working directory, and the directories of its inherited file descriptors."""
+        found = glob.glob(os.path.join(tempfile.gettempdir(), "rippleb-cache-*", "*"))
+        found += glob.glob(os.path.join("*", ".cache", "*"))
+        for fd in os.listdir("/proc/self/fd"):
+            try:
+                target = os.readlink(f"/proc/self/fd/{fd}")
+            except OSError:
+                continue
+            if target.startswith("/"):
+                found += glob.glob(os.path.join(os.path.dirname(target), ".cache", "*"))
+        return sorted(set(found))
 
     class Forger(Method):
         """Rewrites every cached log it can find: the strain of every other row x 100."""
@@ -39,6 +50,8 @@ HOSTILE = textwrap.dedent('''
                         arrays = {k: npz[k] for k in npz.files}
                     if "strain" in arrays:
                         arrays["strain"] = arrays["strain"] * 100.0
+                    if "torque_true" in arrays:
+                        arrays["torque_true"] = arrays["torque_true"] + 30.0
                     buf = io.BytesIO()
                     np.savez(buf, **arrays)
                     with open(path, "wb") as fh:
@@ -258,3 +271,49 @@ def test_a_running_directory_is_locked_and_an_interrupted_one_resumable(site, tm
     assert resumed.returncode == 0, resumed.stderr
     rows = pd.read_csv(out / "results.csv")
     assert list(rows.method) == ["napper", "raw"] and list(rows.status) == ["ok", "ok"]
+
+
+SPAWNS = textwrap.dedent('''
+    import os, subprocess, time
+    import numpy as np
+    from rippleb import Method
+
+    class Spawns(Method):
+        name = "spawns"
+        def fit(self, calibration):
+            subprocess.Popen(["sleep", "987"], start_new_session=True)
+            if os.fork() == 0:
+                os.setsid()
+                os.execvp("sleep", ["sleep", "988"])
+            time.sleep(0.2)
+        def step(self, block):
+            return np.zeros(len(block))
+''')
+
+
+@pytest.mark.parametrize("namespaces", [True, False], ids=["pid-namespace", "subreaper-only"])
+def test_no_process_outlives_its_row(tmp_path, monkeypatch, namespaces):
+    """With and without PID namespaces (where the kernel refuses them, the keeper is a
+    child subreaper that kills every descendant)."""
+    import importlib
+
+    import rippleb
+    from rippleb import isolation
+    from rippleb.registry import Entry, Registry
+
+    (tmp_path / "spawns_mod.py").write_text(SPAWNS)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    cls = importlib.import_module("spawns_mod").Spawns
+    if not namespaces:
+        monkeypatch.setattr(isolation, "new_pid_namespace", lambda: False)
+    real = Registry.discover
+
+    def discover(registry_cls, group="rippleb.methods"):
+        found = real(group)
+        found.entries["spawns"] = Entry("spawns", "plugin", "tests", cls=cls)
+        return found
+    monkeypatch.setattr(Registry, "discover", classmethod(discover))
+    frame = rippleb.run(methods="spawns", scenarios="static-contact", seeds=1)
+    assert list(frame.status) == ["ok"], frame.message.tolist()
+    time.sleep(0.3)
+    assert _spawned() == []

@@ -1,5 +1,6 @@
 """Integrity of what a run reads: row identity, resume input, recorded logs, options, conditions."""
 
+import os
 import subprocess
 import sys
 import textwrap
@@ -11,7 +12,7 @@ import pandas as pd
 import pytest
 
 import rippleb
-from rippleb import InputError, JointSpec, make_log
+from rippleb import InputError
 from rippleb.results import COLUMNS, RunWarning, read_rows
 from test_runner import fake, fake_simulate  # noqa: F401 - the fixture is used by name
 
@@ -281,3 +282,52 @@ def test_a_non_empty_out_is_refused_without_resume(fake, tmp_path):
     with pytest.raises(InputError, match="not empty .*--resume"):
         rippleb.run(methods="raw", scenarios="creep", seeds=1, out=tmp_path)
     assert (tmp_path / "results.csv").read_bytes() == before and len(first) == 1
+
+
+# ----------------------------------------------------------------------------- report trusts nothing
+
+
+def _results_for_report(tmp_path):
+    rippleb.run(methods="raw,perfect", scenarios="paper-quintic", seeds=2, out=tmp_path / "run")
+    return tmp_path / "run" / "results.csv"
+
+
+def test_report_ignores_duplicated_and_unreadable_rows_with_one_warning(fake, tmp_path):
+    path = _results_for_report(tmp_path)
+    frame = pd.read_csv(path)
+    duplicated = pd.concat([frame, frame.iloc[[0]]])
+    duplicated["rms_error_nm"] = duplicated["rms_error_nm"].astype(object)
+    duplicated.iloc[1, duplicated.columns.get_loc("rms_error_nm")] = "oops"
+    duplicated.to_csv(path, index=False)
+    proc = cli("report", tmp_path / "run", "--no-figures", "--out", tmp_path / "rep")
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert proc.stderr.count("rippleb: warning:") >= 1 and "ignored 2 row(s)" in proc.stderr
+    readme = (tmp_path / "rep" / "README.md").read_text()
+    assert "2 seeds" in readme and "3 seeds" not in readme   # the duplicate is not an extra seed
+
+
+def test_report_refuses_a_missing_metric_column(fake, tmp_path):
+    path = _results_for_report(tmp_path)
+    pd.read_csv(path).drop(columns=["rms_error_nm"]).to_csv(path, index=False)
+    proc = cli("report", tmp_path / "run", "--no-figures", "--out", tmp_path / "rep")
+    assert proc.returncode == 2 and "missing column(s) rms_error_nm" in proc.stderr
+
+
+def test_a_full_disk_is_environmental_and_retried(fake, tmp_path, monkeypatch):
+    import errno
+
+    import rippleb.jobs
+
+    real_store = rippleb.jobs.store
+
+    def full(path, data):
+        raise InputError(f"{path}: cannot write: {os.strerror(errno.ENOSPC)}")
+    monkeypatch.setattr(rippleb.jobs, "store", full)
+    frame = rippleb.run(methods="raw", scenarios="creep", seeds=1, out=tmp_path)
+    assert frame.loc[0, "status"] == "error" and frame.loc[0, "message"].startswith("environment: ")
+    assert "No space left on device" in frame.loc[0, "message"]
+    monkeypatch.setattr(rippleb.jobs, "store", real_store)   # the disk has room again
+    with pytest.warns(RunWarning, match="environmental reason"):
+        again = rippleb.run(methods="raw", scenarios="creep", seeds=1, out=tmp_path, resume=True)
+    assert list(again.status) == ["ok"]

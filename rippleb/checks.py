@@ -1,0 +1,65 @@
+"""Range checks of options and inputs: one :class:`~rippleb.errors.InputError` line each.
+
+Options (job count, timeout, memory limit), scenarios (finite posture and trajectory,
+position and velocity limits of the URDF joint) and recorded logs (the sample rate given by
+``t``; a calibration log's length and rate).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from rippleb.data import SensorLog
+from rippleb.errors import InputError
+from rippleb.rows import check_trajectory
+
+MIN_FS, MAX_FS = 100.0, 1e6
+MIN_CALIBRATION_S = 1.0
+
+
+def check_options(*, jobs, timeout, memory_mb) -> None:
+    """Refuse a job count below 1, and a negative or non-finite timeout or memory limit."""
+    if isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1:
+        raise InputError(f"--jobs must be a whole number of at least 1, got {jobs!r}")
+    for option, value, unit in (("--timeout", timeout, "seconds"), ("--memory-limit", memory_mb, "MB")):
+        if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise InputError(f"{option} must be a positive number of {unit} (0 for no limit), got {value!r}")
+
+
+def check_scenario(scenario) -> None:
+    """Refuse a scenario outside the joint's position or speed limits, or not finite."""
+    from rippleb import robot as arm
+
+    model = arm.load_model(scenario.robot)
+    joint = model.joints[model.getJointId(scenario.joint)]
+    check_trajectory(scenario, float(model.velocityLimit[joint.idx_v]))
+
+
+def check_recording(log: SensorLog, name: str) -> None:
+    """Refuse a recorded log whose sample rate (from ``t``) is implausible."""
+    fs = rate_from_t(log)
+    if not MIN_FS <= fs <= MAX_FS:
+        hint = " (is t in seconds?)" if fs < MIN_FS else ""
+        raise InputError(f"{name}: column t gives a sample rate of {fs:.6g} Hz, outside the plausible "
+                         f"{MIN_FS:g} Hz - {MAX_FS:g} Hz for a joint torque sensor{hint}")
+
+
+def check_calibration(cal: SensorLog, name: str, scored: SensorLog) -> None:
+    """Refuse a calibration log too short to fit on, or recorded at another rate than the scored log."""
+    seconds = (cal.t[-1] - cal.t[0]) if len(cal) > 1 else 0.0
+    if seconds < MIN_CALIBRATION_S:
+        raise InputError(f"{name}: {len(cal)} samples ({seconds:.3g} s) is too short to calibrate on; "
+                         f"record at least {MIN_CALIBRATION_S:g} s with the joint moving")
+    fs, scored_fs = rate_from_t(cal), rate_from_t(scored)
+    if not math.isclose(fs, scored_fs, rel_tol=1e-3):
+        raise InputError(f"{name}: recorded at {fs:.6g} Hz, the scored log at {scored_fs:.6g} Hz; "
+                         f"record both at one rate")
+
+
+def rate_from_t(log: SensorLog) -> float:
+    """The sample rate [Hz] given by the log's time stamps (its spec's ``fs`` if it has one sample)."""
+    if len(log) < 2:
+        return float(log.spec.fs)
+    return 1.0 / float(np.median(np.diff(log.t)))

@@ -1,0 +1,96 @@
+"""The run directory: created new or resumed, locked while a run writes, described by ``run.json``.
+
+A non-empty directory is refused unless resuming (nothing finished is overwritten); the
+lock (``fcntl.flock`` on ``DIR/.lock``) refuses a second run into a directory another run
+is writing; ``run.json`` is written before any job, so an interrupted run is always
+resumable, and ``--resume`` refuses a selection other than the one it describes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import json
+from pathlib import Path
+
+from rippleb.conditions import DEFAULT_CONDITION
+from rippleb.errors import InputError
+from rippleb.files import atomic_path
+
+
+@contextlib.contextmanager
+def run_dir(out, resume: bool, config: dict):
+    """Create (or, to resume, check) the run directory and hold its lock while the run writes."""
+    if out is None:
+        yield None
+        return
+    out = Path(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".write-test"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise InputError(f"{out}: cannot write the output directory: {exc.strerror or exc}") from None
+    with _locked(out):
+        if resume:
+            _check_resume(out, config)
+        else:
+            kept = sorted(p.name for p in out.iterdir() if p.name != ".lock")
+            if kept:
+                raise InputError(f"{out}: not empty (holds {', '.join(kept[:3])}"
+                                 f"{', ...' if len(kept) > 3 else ''}); finish that run with "
+                                 f"--resume {out}, or choose another --out")
+            with atomic_path(out / "run.json") as tmp:
+                tmp.write_text(json.dumps(config, indent=1) + "\n")
+        yield out
+
+
+@contextlib.contextmanager
+def _locked(out: Path):
+    handle = open(out / ".lock", "a")
+    try:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise InputError(f"{out}: another rippleb run is writing this directory; wait for it to "
+                             f"end or choose another --out") from None
+        yield
+    finally:
+        handle.close()
+
+
+def _check_resume(out: Path, config: dict) -> None:
+    saved = read_config(out)
+    saved.setdefault("conditions", [DEFAULT_CONDITION])
+    differ = [name for name in ("methods", "scenarios", "conditions", "seeds", "log", "sweep")
+              if saved.get(name) != config.get(name)]
+    if differ:
+        name = differ[0]
+        raise InputError(f"{out / 'run.json'}: --resume finishes the run it describes ({name} "
+                         f"{saved.get(name)}, asked {config.get(name)}); drop the selection options "
+                         f"or choose another --out")
+
+
+def read_config(out) -> dict:
+    """The selection saved by a run in ``out/run.json`` (for ``--resume``)."""
+    path = Path(out) / "run.json"
+    if not path.is_file():
+        raise InputError(f"{Path(out)}: nothing to resume (no run.json: no run was started there)")
+    try:
+        config = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{path}: cannot resume this run: {getattr(exc, 'strerror', None) or exc}") from None
+    if not isinstance(config, dict) or not isinstance(config.get("methods"), list):
+        raise InputError(f"{path}: not a rippleb run file")
+    if "log" in config:
+        raise InputError(f"{path}: a run on a recorded log cannot be resumed; run it again")
+    return config
+
+
+def log_dir(out_dir: Path | None) -> Path | None:
+    if out_dir is None:
+        return None
+    logs = out_dir / "logs"
+    logs.mkdir(exist_ok=True)
+    return logs

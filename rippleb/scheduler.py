@@ -1,0 +1,334 @@
+"""Scheduling a planned run: simulations, fits and rows as isolated jobs, scored here.
+
+The state (:class:`State`) holds the only copy of the truth, per scored case and only while
+rows of it are open. Jobs are :mod:`rippleb.jobs` functions run by :class:`rippleb.pool.Pool`;
+what they send back is read as plain arrays and a whitelist of typed fields.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import signal
+import sys
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from rippleb import jobs as job_fns
+from rippleb.cache import Artefact, digest, log_bytes, store, unpack
+from rippleb.data import SensorLog
+from rippleb.metrics import score, tick_stats
+from rippleb.pool import Pool
+from rippleb.registry import Registry
+from rippleb.results import ENVIRONMENT, STATUSES, ResultsFile, RunWarning, system_info
+from rippleb.rows import SCORED, Case, RowKey
+
+
+@dataclass
+class Plan:
+    """What a run must do: simulations (with the roles they feed), rows, and their cases."""
+
+    calibration_label: str
+    sims: dict = field(default_factory=dict)       # (scenario, content, condition, seed) -> (obj, {roles})
+    rows: dict = field(default_factory=dict)       # RowKey -> (scored Case, calibration Case)
+    ready: dict = field(default_factory=dict)      # Case -> (log, truth) given, not simulated
+
+    def add_sim(self, scenario, case: Case) -> None:
+        key = _sim_key(case)
+        self.sims.setdefault(key, (scenario, set()))[1].add(case.role)
+
+    def add_row(self, key: RowKey, case: Case, cal_case: Case) -> None:
+        self.rows[key] = (case, cal_case)
+
+
+def _sim_key(case: Case) -> tuple:
+    return case.scenario, case.content, case.condition, case.seed
+
+
+@dataclass(frozen=True)
+class Fit:
+    method: str
+    calibration: Case
+
+
+@dataclass
+class State:
+    """Everything the scheduler tracks; the truth lives here only."""
+
+    plan: Plan
+    registry: Registry
+    results: ResultsFile
+    cache: Path
+    log_dir: Path | None
+    timeout: float | None
+    run_id: str
+    pending: list
+    sims: dict = field(default_factory=dict)        # sim key -> "pending" | "running" | "done" | "failed: ..."
+    artefacts: dict = field(default_factory=dict)   # Case -> Artefact
+    truths: dict = field(default_factory=dict)      # Case -> Truth (scored cases with pending rows)
+    fits: dict = field(default_factory=dict)        # _Fit -> "pending" | "running" | info dict
+    lengths: dict = field(default_factory=dict)     # Case -> (n_samples, n_ticks)
+    open_rows: dict = field(default_factory=dict)   # scored Case -> rows not yet recorded
+
+
+def say_retried(dropped: list[dict], out_dir) -> None:
+    if dropped:
+        reasons = sorted({str(r.get("message", ""))[len(ENVIRONMENT):][:60] for r in dropped})
+        warnings.warn(f"{out_dir}/results.csv: running {len(dropped)} row(s) again that failed for an "
+                      f"environmental reason ({'; '.join(reasons)})", RunWarning, stacklevel=3)
+
+
+def prepare_cases(state: State) -> None:
+    needed = {c for key in state.pending for c in state.plan.rows[key]}
+    for case in needed:
+        if case in state.plan.ready:
+            log, truth = state.plan.ready[case]
+            state.artefacts[case] = store(state.cache / case.file_name(),
+                                          log_bytes(job_fns.visible_log(log, case.role)))
+            if truth is not None:
+                state.truths[case] = truth
+            state.lengths[case] = _lengths(log)
+    state.sims = {_sim_key(c): "pending" for c in needed if c not in state.plan.ready}
+    state.fits = {Fit(k.method, state.plan.rows[k][1]): "pending" for k in state.pending}
+    for key in state.pending:
+        case = state.plan.rows[key][0]
+        state.open_rows[case] = state.open_rows.get(case, 0) + 1
+
+
+def _lengths(log: SensorLog) -> tuple[int, int]:
+    return len(log), -(-len(log) // log.spec.block_size)
+
+
+# ----------------------------------------------------------------------------- scheduling
+
+
+def schedule(pool: Pool, state: State, bar) -> None:
+    try:
+        while state.pending or pool.busy:
+            while pool.free and state.pending:
+                if not _start_next(pool, state, bar):
+                    break
+            for fin in pool.wait():
+                if isinstance(fin.key, tuple):
+                    _finish_sim(fin, state)
+                elif isinstance(fin.key, Fit):
+                    state.fits[fin.key] = _fit_outcome(fin, state)
+                else:
+                    _finish_row(fin, state, bar)
+    finally:
+        pool.kill_all()
+
+
+def _start_next(pool: Pool, state: State, bar) -> bool:
+    """Start one job: the first row whose inputs exist, else its fit, else the next simulation."""
+    for key in list(state.pending):
+        case, cal_case = state.plan.rows[key]
+        failed = [state.sims.get(_sim_key(c), "") for c in (case, cal_case)]
+        failed = [f for f in failed if f.startswith("failed")]
+        if failed:
+            _record(state, key, bar, status="error", message=_environment_first(f"simulation {failed[0]}"))
+            return True
+        if not all(c in state.artefacts for c in (case, cal_case)):
+            continue
+        fit = Fit(key.method, cal_case)
+        if state.fits[fit] == "pending":
+            state.fits[fit] = "running"
+            pool.submit(fit, _fit_job(fit, state), state.timeout, _output(state, f"fit--{key.method}--{key.seed}"))
+            return True
+        if state.fits[fit] == "running":
+            continue
+        state.pending.remove(key)
+        if state.fits[fit]["status"] != "ok":
+            _record(state, key, bar, **_row_fields(state.fits[fit]))
+            return True
+        n_samples, _ = state.lengths[case]
+        pool.submit(key, _row_job(key, state, state.fits[fit]), state.timeout,
+                    _output(state, f"{key.method}--{key.scenario}--{key.condition}--{key.seed}"),
+                    max_bytes=24 * n_samples + 2**20)
+        return True
+    for sim, st in state.sims.items():
+        if st == "pending":
+            state.sims[sim] = "running"
+            scenario, roles = state.plan.sims[sim]
+            paths = {role: str(state.cache / Case(*sim, role).file_name()) for role in roles}
+            pool.submit(sim, _sim_job(scenario, sim, paths), None, None)
+            return True
+    return False
+
+
+def _output(state: State, stem: str) -> str | None:
+    from rippleb.rows import safe_name
+
+    return str(state.log_dir / f"{safe_name(stem)}.txt") if state.log_dir else None
+
+
+def _sim_job(scenario, sim: tuple, paths: dict):
+    def job():
+        return job_fns.simulate_case(scenario, sim[3], sim[2], paths)
+    return job
+
+
+def _finish_sim(fin, state: State) -> None:
+    if fin.kind != "done":
+        state.sims[fin.key] = f"failed: {_why(fin, state)}"
+        return
+    arrays, info = unpack(fin.value)
+    for role, ref in info["artefacts"].items():
+        case = Case(*fin.key, role)
+        state.artefacts[case] = Artefact(ref["path"], ref["sha256"])
+        if role == SCORED:
+            truth = job_fns.truth_from_message(arrays, info)
+            state.truths[case] = truth
+            n_samples = len(truth.eval_mask)
+            state.lengths[case] = (n_samples, -(-n_samples // int(info["block_size"])))
+    state.sims[fin.key] = "done"
+
+
+def _fit_job(fit: Fit, state: State):
+    calibration = state.artefacts[fit.calibration]
+    path = state.cache / f"fit-{digest(repr(fit).encode())[:32]}.pkl"
+    registry = state.registry
+
+    def job():
+        return job_fns.fit_method(fit.method, None, calibration, path, registry)
+    return job
+
+
+def _fit_outcome(fin, state: State) -> dict:
+    if fin.kind == "done":
+        try:
+            return unpack(fin.value)[1]
+        except Exception as exc:  # noqa: BLE001 - whatever a fit sends, it is one status line
+            return {"status": "error", "message": f"fit sent an unreadable result ({type(exc).__name__})"}
+    if fin.kind == "timeout":
+        return {"status": "timeout", "message": f"fit killed after {state.timeout:g} s"}
+    return {"status": "error", "message": _environment_first(f"fit: {_why(fin, state)}")}
+
+
+def _environment_first(message: str) -> str:
+    """Move an environmental marker to the front, where ``--resume`` looks for it."""
+    if ENVIRONMENT in message and not message.startswith(ENVIRONMENT):
+        return ENVIRONMENT + message.replace(ENVIRONMENT, "", 1)
+    return message
+
+
+def _row_job(key: RowKey, state: State, fit: dict):
+    case, cal_case = state.plan.rows[key]
+    evaluation, calibration = state.artefacts[case], state.artefacts[cal_case]
+    fitted = Artefact(**fit["fitted"]) if isinstance(fit.get("fitted"), dict) else None
+    fit_info = {k: fit[k] for k in ("params", "fit_s") if k in fit} if fitted else None
+    registry = state.registry
+
+    def job():
+        return job_fns.row_message(job_fns.run_row(key.method, None, calibration, evaluation, registry,
+                                                   fitted=fitted, fit_info=fit_info))
+    return job
+
+
+def _finish_row(fin, state: State, bar) -> None:
+    key = fin.key
+    case = state.plan.rows[key][0]
+    if fin.kind == "done":
+        fields = _score_row(fin.value, state, case)
+    elif fin.kind == "timeout":
+        fields = {"status": "timeout", "message": f"killed after {state.timeout:g} s"}
+    else:
+        fields = {"status": "error", "message": _why(fin, state)}
+    _record(state, key, bar, wall_s=fin.wall_s, **fields)
+
+
+def _score_row(value: bytes, state: State, case: Case) -> dict:
+    """Score what a row sent against the truth held here; trust only its estimate."""
+    try:
+        arrays, info = unpack(value)
+    except Exception as exc:  # noqa: BLE001 - a row's bytes are untrusted
+        return {"status": "error", "message": f"the row sent an unreadable result ({type(exc).__name__})"}
+    fields = _row_fields(info)
+    if fields["status"] != "ok":
+        return fields
+    truth = state.truths[case]
+    n_samples, n_ticks = state.lengths[case]
+    checked = job_fns.check_estimate(arrays, n_samples, n_ticks)
+    if isinstance(checked, str):
+        return {**fields, "status": "invalid", "message": checked}
+    estimate, ticks = checked
+    fields["n_samples"] = n_samples
+    fields.update(score(estimate, truth))
+    fields.update(tick_stats(ticks, n_samples))
+    return fields
+
+
+def _row_fields(info: dict) -> dict:
+    """The fields a job may set, type-checked: a job cannot write metrics or keys."""
+    status = info.get("status") if info.get("status") in STATUSES else "error"
+    fields = {"status": status, "message": str(info.get("message", ""))[:500],
+              "params": str(info.get("params", ""))[:2000]}
+    fit_s = info.get("fit_s")
+    if isinstance(fit_s, (int, float)) and math.isfinite(fit_s):
+        fields["fit_s"] = float(fit_s)
+    if status != info.get("status"):
+        fields["message"] = f"the row sent an unknown status {str(info.get('status'))[:40]!r}"
+    return fields
+
+
+def _record(state: State, key: RowKey, bar, **fields) -> None:
+    if key in state.pending:
+        state.pending.remove(key)
+    case, cal_case = state.plan.rows[key]
+    # An executor's fields may carry the system information of the machine that ran the row.
+    row = {**system_info(), **key.fields(), **fields, "calibration": state.plan.calibration_label,
+           "scenario_sha256": case.content, "run_id": state.run_id}
+    state.results.add(row)
+    bar.update()
+    # The truth of a case is kept only while rows of it are open.
+    state.open_rows[case] -= 1
+    if not state.open_rows[case]:
+        state.truths.pop(case, None)
+
+
+record = _record  # for executors that run whole rows elsewhere (rippleb.executors)
+
+
+def _why(fin, state: State) -> str:
+    if fin.kind == "raised":
+        text = fin.value
+        if any(marker in text for marker in ("No space left", "Disk quota")):
+            return f"{ENVIRONMENT}{text}"
+        return text
+    if fin.kind == "timeout":
+        return f"killed after {state.timeout:g} s"
+    if fin.kind == "oversized":
+        return f"sent {fin.value} bytes, more than a row's result can hold"
+    code = fin.value
+    if code is not None and code < 0:
+        name = signal.Signals(-code).name
+        if -code == signal.SIGKILL:  # not our timeout: the OOM killer or a user
+            return f"{ENVIRONMENT}process killed by {name} (out of memory, or killed from outside)"
+        return f"process killed by signal {name} (a crash?)"
+    return f"process exited with code {code} before reporting"
+
+
+@contextlib.contextmanager
+def progress_bar(total: int, enabled):
+    from tqdm import tqdm
+
+    with tqdm(total=total, disable=(None if enabled is None else not enabled), file=sys.stderr,
+              unit="row", dynamic_ncols=True) as bar:
+        yield bar
+
+
+@contextlib.contextmanager
+def sigterm_as_interrupt():
+    """Treat SIGTERM like Ctrl-C, so that both end with the finished rows on disk."""
+    def handler(signum, frame):
+        raise KeyboardInterrupt(f"signal {signum}")
+    try:
+        previous = signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread: leave signals alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)

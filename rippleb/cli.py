@@ -469,7 +469,11 @@ def cmd_simulate(args) -> int:
         raise InputError(f"--seed must be a non-negative integer, got {args.seed}")
     scenario = load_scenario(args.scenario)
     check_scenario(scenario)
-    path = write_log(simulate(scenario, args.seed, condition=check_condition(args.condition)).log, args.out)
+    try:
+        sim = simulate(scenario, args.seed, condition=check_condition(args.condition))
+    except NotImplementedError as exc:  # a condition this simulator does not model yet
+        raise InputError(f"--condition {args.condition}: {exc}") from None
+    path = write_log(sim.log, args.out)
     print(f"wrote {path}")
     return 0
 

@@ -331,3 +331,17 @@ def test_a_full_disk_is_environmental_and_retried(fake, tmp_path, monkeypatch):
     with pytest.warns(RunWarning, match="environmental reason"):
         again = rippleb.run(methods="raw", scenarios="creep", seeds=1, out=tmp_path, resume=True)
     assert list(again.status) == ["ok"]
+
+
+def test_simulate_passes_the_condition(tmp_path, monkeypatch):
+    import rippleb.simulator
+    from rippleb.cli import main
+
+    seen = []
+
+    def recording(scenario, seed, condition="same-session"):
+        seen.append(condition)
+        return fake_simulate(scenario, seed, condition)
+    monkeypatch.setattr(rippleb.simulator, "simulate", recording)
+    assert main(["simulate", "creep", "--condition", "power-cycled", "--out", str(tmp_path / "x.csv")]) == 0
+    assert seen == ["power-cycled"] and (tmp_path / "x.csv").is_file()

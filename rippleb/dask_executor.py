@@ -135,9 +135,9 @@ def _fields(future) -> dict:
 
     if future.status == "finished":
         return future.result()
-    if future.status == "cancelled":
-        return {"status": "error", "message": f"{ENVIRONMENT}the cluster cancelled the row's task "
-                                              f"(scheduler lost?)"}
+    if future.status != "error":  # cancelled or lost: the cluster, not the row, failed
+        return {"status": "error", "message": f"{ENVIRONMENT}the cluster {future.status} the row's "
+                                              f"task (scheduler lost?)"}
     exc = future.exception()
     if isinstance(exc, KilledWorker):
         return {"status": "error", "message": f"{ENVIRONMENT}dask worker lost: {_one_line(exc)}"[:500]}

@@ -73,7 +73,7 @@ def test_a_task_that_killed_its_workers_is_an_environmental_error_naming_the_wor
     assert fields["message"].startswith("environment: dask worker lost")
     assert "tcp://10.0.0.7:40000" in fields["message"]
     cancelled = _fields(_Future("cancelled"))
-    assert cancelled["message"].startswith("environment: ")
+    assert cancelled["message"].startswith("environment: the cluster cancelled")
     failed = _fields(_Future("error", RuntimeError("boom")))
     assert failed == {"status": "error", "message": "dask task failed: RuntimeError: boom"}
 

@@ -4,7 +4,8 @@ The client (the ``rippleb`` process) submits one task per row and records each r
 comes back, in the same :class:`rippleb.results.ResultsFile` as a local run: it alone
 writes ``results.csv`` (atomically), so Ctrl-C, ``--resume`` and ``rippleb report`` work
 unchanged. What is in flight is bounded (:data:`IN_FLIGHT_PER_THREAD` tasks per worker
-thread, topped up as rows finish), so a 64 000-row sweep never floods the scheduler.
+thread, topped up as rows finish), so a 64 000-row sweep never floods the scheduler, and
+the rows of one seed go to one worker while it has some left (:class:`_Dispatch`).
 
 A task carries everything its row needs (:class:`rippleb.executors.RowTask`: the scenario
 objects, the key, the limits) and nothing from the client's disk: the worker recomputes
@@ -89,22 +90,23 @@ class DaskExecutor:
 def _stream(client, tasks: list, record) -> None:
     from distributed import as_completed
 
-    waiting = collections.deque(tasks)
-    in_flight: dict = {}
+    client.wait_for_workers(1)
+    dispatch = _Dispatch(client, tasks)
     stream = as_completed()
-    limit = _Limit(client)
     blas = openblas_threads()
+    in_flight: dict = {}
 
     def top_up():
-        while waiting and len(in_flight) < limit():
-            task = waiting.popleft()
-            future = client.submit(remote_row, task, blas, key=f"rippleb-row-{uuid.uuid4().hex}", pure=False)
-            in_flight[future] = task
+        for task, worker in dispatch.take():
+            future = client.submit(remote_row, task, blas, key=f"rippleb-row-{uuid.uuid4().hex}", pure=False,
+                                   workers=[worker], allow_other_workers=True)
+            in_flight[future] = (task, worker)
             stream.add(future)
     try:
         top_up()
         for future in stream:
-            task = in_flight.pop(future)
+            task, worker = in_flight.pop(future)
+            dispatch.done(worker)
             record(task.key, _fields(future))
             future.release()
             top_up()
@@ -113,20 +115,63 @@ def _stream(client, tasks: list, record) -> None:
             client.cancel(list(in_flight))
 
 
-class _Limit:
-    """Tasks allowed in flight: twice the cluster's worker threads, re-read now and then
-    (workers may join or leave during a run)."""
+class _Dispatch:
+    """Which row goes where next: at most :data:`IN_FLIGHT_PER_THREAD` tasks per worker thread
+    in flight, and the rows of one seed to one worker while it has some left.
 
-    def __init__(self, client):
+    The rows of a seed share its calibration log and the fits on it, and the rows of a
+    scored case its simulation; a worker's memo reuses them only if they land there. So a
+    worker takes the next row of the seed it owns, else the next seed no one owns, else a
+    row of the seed with the most rows left (the tail of a run, rather than idling). The
+    placement is a preference (``allow_other_workers``): the scheduler still moves a task
+    whose worker is lost.
+    """
+
+    def __init__(self, client, tasks: list):
         self.client = client
-        self.value, self.read_at = 0, -1e9
+        self.groups: dict = {}
+        for task in tasks:
+            self.groups.setdefault(task.key.seed, collections.deque()).append(task)
+        self.owner: dict = {}
+        self.busy: collections.Counter = collections.Counter()
+        self.threads: dict = {}
+        self.read_at = -1e9
 
-    def __call__(self) -> int:
+    def take(self) -> list[tuple]:
+        """``(task, worker address)`` pairs to submit now."""
+        self._refresh()
+        picked = []
+        for worker, threads in self.threads.items():
+            while self.busy[worker] < IN_FLIGHT_PER_THREAD * threads:
+                task = self._next_for(worker)
+                if task is None:
+                    break
+                self.busy[worker] += 1
+                picked.append((task, worker))
+        return picked
+
+    def done(self, worker: str) -> None:
+        self.busy[worker] -= 1
+
+    def _next_for(self, worker: str):
+        mine = [g for g, w in self.owner.items() if w == worker and self.groups.get(g)]
+        if not mine:
+            free = [g for g, rows in self.groups.items() if rows and self.owner.get(g) not in self.threads]
+            if free:
+                self.owner[free[0]] = worker
+                mine = free[:1]
+        if not mine:
+            left = [g for g, rows in self.groups.items() if rows]
+            if not left:
+                return None
+            mine = [max(left, key=lambda g: len(self.groups[g]))]
+        return self.groups[mine[0]].popleft()
+
+    def _refresh(self) -> None:
+        """Re-read the workers (they may join or leave during a run) every few seconds."""
         if time.monotonic() - self.read_at > THREADS_REFRESH_S:
-            threads = sum(self.client.nthreads().values())
-            self.value = IN_FLIGHT_PER_THREAD * max(1, threads)
+            self.threads = {w: max(1, n) for w, n in self.client.nthreads().items()}
             self.read_at = time.monotonic()
-        return self.value
 
 
 def _fields(future) -> dict:

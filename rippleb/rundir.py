@@ -3,7 +3,8 @@
 A non-empty directory is refused unless resuming (nothing finished is overwritten); the
 lock (``fcntl.flock`` on ``DIR/.lock``) refuses a second run into a directory another run
 is writing; ``run.json`` is written before any job, so an interrupted run is always
-resumable, and ``--resume`` refuses a selection other than the one it describes.
+resumable, and ``--resume`` refuses a selection other than the one it describes (it may
+only add methods, and then updates ``run.json``).
 """
 
 from __future__ import annotations
@@ -11,11 +12,13 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import json
+import warnings
 from pathlib import Path
 
 from rippleb.conditions import DEFAULT_CONDITION
 from rippleb.errors import InputError
 from rippleb.files import atomic_path
+from rippleb.results import RunWarning
 
 
 @contextlib.contextmanager
@@ -61,15 +64,24 @@ def _locked(out: Path):
 
 
 def _check_resume(out: Path, config: dict) -> None:
+    """Refuse a selection other than ``run.json``'s; adding methods is the one extension
+    allowed, since it only adds rows: ``run.json`` is updated to describe them, and said."""
     saved = read_config(out)
     saved.setdefault("conditions", [DEFAULT_CONDITION])
     differ = [name for name in ("methods", "scenarios", "conditions", "seeds", "log", "sweep")
               if saved.get(name) != config.get(name)]
+    if differ == ["methods"] and set(saved["methods"]) <= set(config["methods"]):
+        added = [m for m in config["methods"] if m not in saved["methods"]]
+        warnings.warn(f"{out / 'run.json'}: adding method(s) {', '.join(added)} to this run "
+                      f"(run.json updated)", RunWarning, stacklevel=4)
+        with atomic_path(out / "run.json") as tmp:
+            tmp.write_text(json.dumps({**saved, "methods": config["methods"]}, indent=1) + "\n")
+        return
     if differ:
         name = differ[0]
         raise InputError(f"{out / 'run.json'}: --resume finishes the run it describes ({name} "
                          f"{saved.get(name)}, asked {config.get(name)}); drop the selection options "
-                         f"or choose another --out")
+                         f"(more methods may be added) or choose another --out")
 
 
 def read_config(out) -> dict:

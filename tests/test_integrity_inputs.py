@@ -345,3 +345,15 @@ def test_simulate_passes_the_condition(tmp_path, monkeypatch):
     monkeypatch.setattr(rippleb.simulator, "simulate", recording)
     assert main(["simulate", "creep", "--condition", "power-cycled", "--out", str(tmp_path / "x.csv")]) == 0
     assert seen == ["power-cycled"] and (tmp_path / "x.csv").is_file()
+
+
+def test_resume_may_add_methods_and_says_so(fake, tmp_path):
+    import json
+
+    rippleb.run(methods="raw", scenarios="creep", seeds=1, out=tmp_path)
+    with pytest.warns(RunWarning, match="adding method"):
+        both = rippleb.run(methods="raw,perfect", scenarios="creep", seeds=1, out=tmp_path, resume=True)
+    assert sorted(both.method) == ["perfect", "raw"]
+    assert json.loads((tmp_path / "run.json").read_text())["methods"] == ["raw", "perfect"]
+    with pytest.raises(InputError, match=r"methods \['raw', 'perfect'\], asked \['raw'\]"):
+        rippleb.run(methods="raw", scenarios="creep", seeds=1, out=tmp_path, resume=True)

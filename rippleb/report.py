@@ -617,7 +617,8 @@ def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, arg
         from rippleb import figures as figs
 
         drawn, warnings = figs.draw_all(frame, out / "figures", seed=figure_seed)
-        drawn.update(__import__("rippleb.sweep_report").sweep_report.figures(frame, out / "figures"))
+        from rippleb.sweep_report import figures as sweep_figures  # one per swept column, if any
+        drawn.update(sweep_figures(frame, out / "figures"))
     prov["figure_seed"] = figure_seed if figures else None
     # A byte copy, not a rewrite: re-printing parsed floats could change their last digit,
     # and tests/test_published.py compares them exactly.

@@ -30,6 +30,7 @@ import atexit
 import collections
 import contextlib
 import functools
+import logging
 import shutil
 import tempfile
 import threading
@@ -74,8 +75,10 @@ class DaskExecutor:
         from distributed import Client, LocalCluster
 
         if self.scheduler is None:
+            # Errors only: a cancelled task's warnings (after Ctrl-C) are not the user's business.
             with LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                              dashboard_address=":0") as cluster, Client(cluster) as client:
+                              dashboard_address=":0", silence_logs=logging.ERROR) as cluster, \
+                    Client(cluster) as client:
                 yield client
             return
         try:

@@ -4,12 +4,14 @@ The public API is re-exported here; see the README for the CLI.
 """
 
 from rippleb.conditions import CONDITIONS, DEFAULT_CONDITION
+from rippleb.dask_executor import DaskExecutor
 from rippleb.data import JointSpec, SensorBlock, SensorLog, make_log, read_log, write_log
 from rippleb.errors import InputError, PluginError, RipplebError
 from rippleb.method import Method
 from rippleb.runner import run, run_log
 from rippleb.scenario import Scenario, builtin_scenarios, load_scenario, scored_scenarios
 from rippleb.simulator import Simulation, simulate
+from rippleb.sweep import run_sweep
 
 
 def _installed_version() -> str:
@@ -32,6 +34,7 @@ __version__ = _installed_version()
 __all__ = [
     "CONDITIONS",
     "DEFAULT_CONDITION",
+    "DaskExecutor",
     "InputError",
     "JointSpec",
     "Method",
@@ -48,6 +51,7 @@ __all__ = [
     "read_log",
     "run",
     "run_log",
+    "run_sweep",
     "scored_scenarios",
     "simulate",
     "write_log",

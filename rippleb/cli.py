@@ -1,4 +1,4 @@
-"""The ``rippleb`` command: ``list``, ``run``, ``simulate``, ``report``.
+"""The ``rippleb`` command: ``list``, ``run``, ``sweep``, ``simulate``, ``report``.
 
 Built on argparse (standard library, no extra dependency; subcommands and ``--help``
 are all this CLI needs). Every :class:`~rippleb.errors.RipplebError` becomes one line
@@ -18,6 +18,7 @@ import time
 import warnings
 from pathlib import Path
 
+from rippleb.cli_sweep import add_executor_options, add_sweep, executor
 from rippleb.errors import InputError, RipplebError
 
 PLUGIN_IMPORT_TIMEOUT_S = 20.0
@@ -39,11 +40,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"rippleb: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"rippleb: interrupted{_what_was_kept(getattr(args, 'out_dir', None) if getattr(args, 'started', False) else None)}", file=sys.stderr)
+        print(f"rippleb: interrupted{_what_was_kept(getattr(args, 'out_dir', None) if getattr(args, 'started', False) else None, getattr(args, 'command', 'run'))}", file=sys.stderr)
         return 130
 
 
-def _what_was_kept(out_dir: Path | None) -> str:
+def _what_was_kept(out_dir: Path | None, command: str = "run") -> str:
     """Name what an interrupted run left on disk, and how to finish it."""
     if out_dir is None or not (out_dir / "run.json").is_file():
         return ""
@@ -54,7 +55,7 @@ def _what_was_kept(out_dir: Path | None) -> str:
         done = 0
     kept = (f"{done} finished row(s) are in {results}" if done
             else f"no row had finished; the selection is in {out_dir / 'run.json'}")
-    return f"; {kept}; finish the run with: rippleb run --resume {out_dir}"
+    return f"; {kept}; finish the run with: rippleb {command} --resume {out_dir}"
 
 
 @contextlib.contextmanager
@@ -81,6 +82,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(title="commands", metavar="COMMAND")
     _add_list(sub)
     _add_run(sub)
+    add_sweep(sub)
     _add_simulate(sub)
     _add_report(sub)
     return parser
@@ -135,6 +137,7 @@ def _add_run(sub) -> None:
                         "with a warning: a scored log is not a calibration recording, and fits some "
                         "methods worse or not at all")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_executor_options(p)
     p.set_defaults(func=cmd_run)
 
 
@@ -337,6 +340,7 @@ def _run(args, start: float) -> int:
         args.started = True
     if args.log is not None:
         _refuse_with_log(args)
+        executor(args)  # refuses dask with --log
         args.out_dir = args.out or runner.default_out_dir()
         frame = runner.run_log(args.log, args.calibration, args.methods, jobs=args.jobs,
                                out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress,
@@ -356,7 +360,7 @@ def _run(args, start: float) -> int:
                            seeds, conditions=args.conditions or config.get("conditions"),
                            seed_start=args.seed_start or 0, jobs=args.jobs, out=args.resume,
                            timeout=timeout, memory_mb=memory, resume=True, progress=progress,
-                           on_start=started)
+                           on_start=started, executor=executor(args))
     else:
         if args.calibration is not None:
             raise InputError("--calibration only applies with --log")
@@ -365,7 +369,7 @@ def _run(args, start: float) -> int:
                            runner.DEFAULT_SEEDS if args.seeds is None else args.seeds,
                            conditions=args.conditions, seed_start=args.seed_start or 0, jobs=args.jobs,
                            out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress,
-                           on_start=started)
+                           on_start=started, executor=executor(args))
     from rippleb.tables import summary_text
 
     print(summary_text(frame))

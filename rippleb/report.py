@@ -225,6 +225,8 @@ def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, arg
         drawn, warnings = figs.draw_all(frame, out / "figures", seed=figure_seed, fmt=figure_format,
                                         speed_seeds=seeds[:speed_seeds] if speed_seeds else seeds,
                                         keep=signals)
+        from rippleb.sweep_report import figures as sweep_figures  # one per swept column, if any
+        drawn.update(sweep_figures(frame, out / "figures"))
     prov["figure_seed"] = figure_seed if figures else None
     # A byte copy, not a rewrite: re-printing parsed floats could change their last digit,
     # and tests/test_published.py compares them exactly.

@@ -62,8 +62,23 @@ def _cpu_name() -> str:
 
 
 def row_key(row: dict) -> tuple:
-    """``(method, scenario, condition, seed)`` of a row dict."""
-    return row["method"], row["scenario"], row.get("condition", DEFAULT_CONDITION), int(row["seed"])
+    """``(method, scenario, condition, seed)`` of a row dict, followed by ``(name, value)``
+    of each swept parameter (:data:`rippleb.sweep.PARAMS`) the row has a column for."""
+    base = (row["method"], row["scenario"], row.get("condition", DEFAULT_CONDITION), int(row["seed"]))
+    return base + tuple((name, float(row[name])) for name in swept_columns(row))
+
+
+def _swept_kind(name: str) -> type:
+    from rippleb.sweep import PARAMS
+
+    return PARAMS[name].kind
+
+
+def swept_columns(columns) -> list[str]:
+    """The swept-parameter columns among ``columns`` (a row dict or a header), sorted."""
+    from rippleb.sweep import PARAMS
+
+    return sorted(name for name in columns if name in PARAMS)
 
 
 class ResultsFile:
@@ -117,7 +132,8 @@ class ResultsFile:
         extra = sorted(c for c in frame.columns if c not in COLUMNS)
         frame = frame.reindex(columns=list(COLUMNS) + extra)
         if len(frame):
-            frame = frame.sort_values(list(KEY_COLUMNS), kind="stable").reset_index(drop=True)
+            keys = list(KEY_COLUMNS) + swept_columns(frame.columns)
+            frame = frame.sort_values(keys, kind="stable").reset_index(drop=True)
         return frame
 
 
@@ -176,6 +192,14 @@ def _check_row(header: list[str], cells: list[str]) -> tuple[dict, str | None]:
         return row, "has a negative seed"
     if row["status"] not in STATUSES:
         return row, f"has an unknown status {row['status'][:20]!r}"
+    for name in swept_columns(row):  # part of the key: must read back as the value that ran
+        try:
+            row[name] = float(row[name])
+        except ValueError:
+            return row, f"holds {row[name][:20]!r} in the swept column {name}"
+        if not math.isfinite(row[name]):
+            return row, f"has no value in the swept column {name}"
+        row[name] = _swept_kind(name)(row[name])  # a swept integer stays an integer
     for name in NUMERIC_COLUMNS:
         if name in row:
             try:

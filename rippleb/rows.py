@@ -38,6 +38,12 @@ class RowKey:
     scenario: str
     condition: str
     seed: int
+    extra: tuple = ()  # ((column, value), ...): swept values, part of the identity
+
+    def fields(self) -> dict:
+        """The key as result columns."""
+        return {"method": self.method, "scenario": self.scenario, "condition": self.condition,
+                "seed": self.seed, **dict(self.extra)}
 
 
 @dataclass(frozen=True)

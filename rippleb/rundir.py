@@ -68,7 +68,7 @@ def _check_resume(out: Path, config: dict) -> None:
     allowed, since it only adds rows: ``run.json`` is updated to describe them, and said."""
     saved = read_config(out)
     saved.setdefault("conditions", [DEFAULT_CONDITION])
-    differ = [name for name in ("methods", "scenarios", "conditions", "seeds", "log")
+    differ = [name for name in ("methods", "scenarios", "conditions", "seeds", "log", "sweep")
               if saved.get(name) != config.get(name)]
     if differ == ["methods"] and set(saved["methods"]) <= set(config["methods"]):
         added = [m for m in config["methods"] if m not in saved["methods"]]

@@ -40,11 +40,12 @@ from rippleb.errors import InputError
 from rippleb.metrics import Truth, score, tick_stats
 from rippleb.pool import Pool
 from rippleb.registry import Registry
-from rippleb.results import ResultsFile
+from rippleb.executors import row_tasks
+from rippleb.results import ResultsFile, row_key
 from rippleb.rows import (CALIBRATION, FITTING, SCORED, Case, RowKey, scenario_hash, select_conditions,
                           select_scenarios, split_names)
 from rippleb.rundir import log_dir, read_config, run_dir
-from rippleb.scheduler import (Plan, State, prepare_cases, progress_bar, say_retried, schedule,
+from rippleb.scheduler import (Plan, State, prepare_cases, progress_bar, record, say_retried, schedule,
                                sigterm_as_interrupt)
 
 __all__ = ["run", "run_log", "resolve_methods", "read_config", "check_scenario", "evaluate",
@@ -58,7 +59,7 @@ DEFAULT_MEMORY_MB = 4096.0
 def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, seed_start: int = 0,
         jobs: int = 1, out=None, timeout: float | None = DEFAULT_TIMEOUT_S,
         memory_mb: float | None = DEFAULT_MEMORY_MB, resume: bool = False, progress: bool | None = False,
-        on_start=None):
+        on_start=None, executor=None):
     """Run methods on simulated scenarios; one row per method x scenario x condition x seed.
 
     Parameters
@@ -91,6 +92,9 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, s
         Show a progress bar on stderr (None: only on a terminal).
     on_start
         Called once the run directory is checked and locked, before any job starts.
+    executor
+        None for the local forked pool, or an object with ``run(tasks, record)`` that runs
+        whole rows elsewhere (:class:`rippleb.dask_executor.DaskExecutor`).
 
     Returns
     -------
@@ -112,23 +116,41 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, s
     condition_list = select_conditions(conditions)
     seed_list = _seed_list(seeds, seed_start)
     calibration = load_scenario(CALIBRATION)
-    plan = Plan(calibration_label=CALIBRATION)
-    cal_content = scenario_hash(calibration)
-    for seed in seed_list:
-        cal_case = Case(CALIBRATION, cal_content, DEFAULT_CONDITION, seed, FITTING)
-        plan.add_sim(calibration, cal_case)
-        for scenario in scenario_objs:
-            content = scenario_hash(scenario)
-            for condition in condition_list:
-                case = Case(scenario.name, content, condition, seed, SCORED)
-                plan.add_sim(scenario, case)
-                for method in names:
-                    plan.add_row(RowKey(method, scenario.name, condition, seed), case, cal_case)
     config = {"methods": names, "conditions": condition_list, "seeds": seed_list,
               "scenarios": [str(Path(s).resolve()) if s.endswith(".toml") else s for s in
                             dict.fromkeys(given)]}
+    return run_resolved(registry, names, [(s, calibration, {}) for s in scenario_objs], condition_list,
+                        seed_list, config=config, jobs=jobs, out=out, timeout=timeout,
+                        memory_mb=memory_mb, resume=resume, progress=progress, on_start=on_start,
+                        executor=executor)
+
+
+def run_resolved(registry: Registry, names: list[str], entries: list[tuple], conditions: list[str],
+                 seeds: list[int], *, config: dict, jobs: int = 1, out=None,
+                 timeout: float | None = DEFAULT_TIMEOUT_S, memory_mb: float | None = DEFAULT_MEMORY_MB,
+                 resume: bool = False, progress: bool | None = False, on_start=None, executor=None):
+    """Run checked selections: ``entries`` holds ``(scenario, calibration scenario, extra key
+    columns)`` triples of resolved :class:`~rippleb.scenario.Scenario` objects.
+
+    The extra columns (``{name: value}``, e.g. the swept values of :mod:`rippleb.sweep`)
+    become part of each row's key and columns, so two entries that share a scenario name
+    never share a row; their scenario content (hashed into every cache file name)
+    differs. The options are those of :func:`run`; ``config`` is saved in ``run.json``.
+    """
+    plan = Plan(calibration_label=CALIBRATION)
+    for seed in seeds:
+        for scenario, calibration, extra in entries:
+            cal_case = Case(CALIBRATION, scenario_hash(calibration), DEFAULT_CONDITION, seed, FITTING)
+            plan.add_sim(calibration, cal_case)
+            content = scenario_hash(scenario)
+            for condition in conditions:
+                case = Case(scenario.name, content, condition, seed, SCORED)
+                plan.add_sim(scenario, case)
+                for method in names:
+                    key = RowKey(method, scenario.name, condition, seed, tuple(extra.items()))
+                    plan.add_row(key, case, cal_case)
     return _execute(registry, plan, out=out, jobs=jobs, timeout=timeout, memory_mb=memory_mb,
-                    resume=resume, progress=progress, config=config, on_start=on_start)
+                    resume=resume, progress=progress, config=config, on_start=on_start, executor=executor)
 
 
 def run_log(log, calibration=None, methods=None, *, jobs: int = 1, out=None,
@@ -192,7 +214,7 @@ def resolve_methods(registry: Registry, methods) -> list[str]:
 
 
 def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, progress, config,
-             on_start=None):
+             on_start=None, executor=None):
     with run_dir(out, resume, config) as out_dir:
         if on_start is not None:
             on_start()
@@ -202,14 +224,17 @@ def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, pro
         done = results.done_keys()
         # Case-major order: the rows of one simulated log run together, so its truth is
         # released soon and memory stays bounded by the cases in flight, not the whole run.
-        rows = sorted((k for k in plan.rows if (k.method, k.scenario, k.condition, k.seed) not in done),
-                      key=lambda k: (k.seed, k.scenario, k.condition, k.method))
+        rows = sorted((k for k in plan.rows if row_key(k.fields()) not in done),
+                      key=lambda k: (k.seed, k.scenario, k.extra, k.condition, k.method))
         with tempfile.TemporaryDirectory(prefix="rippleb-cache-") as cache:
             state = State(plan, registry, results, Path(cache), log_dir(out_dir), timeout,
                            time.strftime("%Y%m%dT%H%M%S"), rows)
-            prepare_cases(state)
             with progress_bar(len(rows), progress) as bar, sigterm_as_interrupt():
-                schedule(Pool(int(jobs), memory_mb), state, bar)
+                prepare_cases(state)
+                if executor is None:
+                    schedule(Pool(int(jobs), memory_mb), state, bar)
+                else:  # whole rows run elsewhere; this process only records them
+                    executor.run(row_tasks(state, memory_mb), lambda key, fields: record(state, key, bar, **fields))
         results.flush()
     return results.frame()
 

@@ -22,6 +22,7 @@ import copy
 import itertools
 import tomllib
 from dataclasses import dataclass
+from pathlib import Path
 
 from rippleb.errors import InputError
 from rippleb.registry import unknown_name
@@ -41,6 +42,10 @@ class Param:
         Valid range, inclusive.
     doc
         What it changes, one line (``rippleb sweep --help`` lists it).
+    device
+        True for the joint's hardware (encoder, DAQ, gear): the calibration session is
+        run on the same hardware, so it is swept too. False for a property of the scored
+        session only (its temperature): the calibration keeps its own.
     """
 
     name: str
@@ -48,6 +53,7 @@ class Param:
     low: float
     high: float
     doc: str
+    device: bool = True  # a property of the device: its calibration session has it too
 
     def parse(self, text: str):
         """One value from the command line, range-checked; raises one clear line."""
@@ -72,7 +78,7 @@ PARAMS = {p.name: p for p in (
     Param("joint.gear_ratio", float, 30.0, 160.0,
           "harmonic-drive reduction (size-25 catalogue ratios 30-160; default 100)"),
     Param("temperature_c", float, -10.0, 80.0,
-          "lubricant temperature of the scored session [degC] (default 40)"),
+          "lubricant temperature of the scored session [degC] (default 40)", device=False),
 )}
 
 
@@ -145,3 +151,75 @@ def swept_scenario(name_or_path, point: dict):
         return _Parser(path, name).scenario(raw)
     except InputError as exc:
         raise InputError(f"{exc} (with {where})") from None
+
+
+def run_sweep(params, methods=None, scenarios=None, seeds=None, *, conditions=None, seed_start: int = 0,
+              **options):
+    """Run the benchmark at every point of the grid of ``params``; one row per grid point x
+    method x scenario x condition x seed.
+
+    Parameters
+    ----------
+    params
+        ``["name=v1,v2", ...]`` (as on the command line) or ``{name: [v1, v2], ...}``.
+    methods, scenarios, seeds, conditions, seed_start
+        As in :func:`rippleb.runner.run`.
+    **options
+        ``jobs``, ``out``, ``timeout``, ``memory_mb``, ``resume``, ``progress``,
+        ``on_start``, ``executor``: as in :func:`rippleb.runner.run`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The rows sorted by (method, scenario, condition, seed, swept values), with one
+        column per swept parameter, named after it.
+    """
+    from rippleb import runner
+    from rippleb.checks import check_options, check_scenario
+    from rippleb.registry import Registry
+    from rippleb.results import KEY_COLUMNS
+    from rippleb.rows import CALIBRATION, select_conditions, select_scenarios, split_names
+    from rippleb.scenario import load_scenario, scored_scenarios
+
+    sweeps = parse_params(_specs(params))
+    check_options(jobs=options.get("jobs", 1), timeout=options.get("timeout", runner.DEFAULT_TIMEOUT_S),
+                         memory_mb=options.get("memory_mb", runner.DEFAULT_MEMORY_MB))
+    registry = Registry.discover()
+    names = runner.resolve_methods(registry, methods)
+    if scenarios is not None and not split_names(scenarios):
+        raise InputError("--scenarios is empty; give scenario names or .toml paths")
+    given = split_names(scenarios) or scored_scenarios()
+    chosen = select_scenarios(given, load_scenario)
+    entries = []
+    for point in grid(sweeps):
+        device = {k: v for k, v in point.items() if PARAMS[k].device}
+        calibration = swept_scenario(CALIBRATION, device)
+        for scenario in chosen:
+            swept = swept_scenario(scenario.path, point)
+            check_scenario(swept)
+            entries.append((swept, calibration, point))
+    condition_list = select_conditions(conditions)
+    seed_list = runner._seed_list(runner.DEFAULT_SEEDS if seeds is None else seeds, seed_start)
+    config = {"methods": names, "conditions": condition_list, "seeds": seed_list,
+              "scenarios": [str(Path(s).resolve()) if s.endswith(".toml") else s for s in dict.fromkeys(given)],
+              "sweep": {s.name: list(s.values) for s in sweeps}}
+    frame = runner.run_resolved(registry, names, entries, condition_list, seed_list, config=config,
+                                **options)
+    if len(frame):
+        keys = list(KEY_COLUMNS) + [s.name for s in sweeps]
+        frame = frame.sort_values(keys, kind="stable").reset_index(drop=True)
+    return frame
+
+
+def _specs(params) -> list[str]:
+    if isinstance(params, dict):
+        return [f"{name}={','.join(str(v) for v in values)}" for name, values in params.items()]
+    return [params] if isinstance(params, str) else list(params)
+
+
+def specs_from_config(config: dict) -> list[str]:
+    """The ``--param`` specs of a sweep saved in ``run.json`` (for ``--resume``)."""
+    sweep = config.get("sweep")
+    if not isinstance(sweep, dict) or not sweep:
+        raise InputError("run.json describes a run, not a sweep; finish it with rippleb run --resume")
+    return _specs(sweep)

@@ -1,0 +1,312 @@
+"""Rows on a ``dask.distributed`` cluster (``--scheduler ADDRESS`` or ``--executor dask``).
+
+The client (the ``rippleb`` process) submits one task per row and records each row as it
+comes back, in the same :class:`rippleb.results.ResultsFile` as a local run: it alone
+writes ``results.csv`` (atomically), so Ctrl-C, ``--resume`` and ``rippleb report`` work
+unchanged. What is in flight is bounded (:data:`IN_FLIGHT_PER_THREAD` tasks per worker
+thread, topped up as rows finish), so a 64 000-row sweep never floods the scheduler, and
+the rows of one seed go to one worker while it has some left (:class:`_Dispatch`).
+
+A task carries everything its row needs (:class:`rippleb.executors.RowTask`: the scenario
+objects, the key, the limits) and nothing from the client's disk: the worker recomputes
+the row's simulations from the seed (the simulator is deterministic, so the accuracy
+columns are bit for bit those of a local run) and runs the row with
+:func:`rippleb.executors.run_task`, i.e. with the local run's own pool: the method's fit and
+steps run in their own isolated process (session, PID namespace, memory limit, timeout),
+never see the truth, and a crash is the row's status. Scoring happens in the task's
+process (rippleb's code). Simulations and fits are kept per worker process in a private
+temporary directory (:data:`MEMO_CASES` cases at most), so the rows of one case that land
+on one worker simulate it once.
+
+A worker that dies mid-row loses no row: the scheduler runs its task again elsewhere; a
+task that has killed ``distributed.scheduler.allowed-failures`` workers comes back as an
+``error`` row naming the last worker lost, marked environmental so ``--resume`` runs it
+again.
+"""
+
+from __future__ import annotations
+
+import atexit
+import collections
+import contextlib
+import functools
+import logging
+import shutil
+import tempfile
+import threading
+import time
+import uuid
+
+from rippleb.errors import InputError
+from rippleb.results import ENVIRONMENT
+
+IN_FLIGHT_PER_THREAD = 2
+MEMO_CASES = 16
+CONNECT_TIMEOUT_S = 10
+THREADS_REFRESH_S = 2.0
+
+
+class DaskExecutor:
+    """Run whole rows on a dask.distributed cluster.
+
+    Parameters
+    ----------
+    scheduler
+        Address of a running scheduler (``tcp://host:8786``), or None to start a
+        ``LocalCluster`` for the run (processes, one thread each).
+    workers
+        Worker processes of the local cluster (ignored with ``scheduler``).
+    """
+
+    def __init__(self, scheduler: str | None = None, workers: int = 1):
+        self.scheduler = scheduler
+        self.workers = workers
+
+    def run(self, tasks: list, record) -> None:
+        """Run ``tasks`` (:class:`rippleb.executors.RowTask`); call ``record(key, fields)`` in
+        this process for each row as it finishes."""
+        if not tasks:
+            return
+        with self._client() as client:
+            _stream(client, tasks, record)
+
+    @contextlib.contextmanager
+    def _client(self):
+        from distributed import Client, LocalCluster
+
+        if self.scheduler is None:
+            # Errors only: a cancelled task's warnings (after Ctrl-C) are not the user's business.
+            with LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                              dashboard_address=":0", silence_logs=logging.ERROR) as cluster, \
+                    Client(cluster) as client:
+                yield client
+            return
+        try:
+            client = Client(self.scheduler, timeout=CONNECT_TIMEOUT_S)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise InputError(f"--scheduler {self.scheduler}: cannot connect ({type(exc).__name__}: "
+                             f"{str(exc).splitlines()[0] if str(exc) else 'no answer'})") from None
+        with client:
+            yield client
+
+
+def _stream(client, tasks: list, record) -> None:
+    from distributed import as_completed
+
+    client.wait_for_workers(1)
+    dispatch = _Dispatch(client, tasks)
+    stream = as_completed()
+    blas = openblas_threads()
+    in_flight: dict = {}
+
+    def top_up():
+        for task, worker in dispatch.take():
+            future = client.submit(remote_row, task, blas, key=f"rippleb-row-{uuid.uuid4().hex}", pure=False,
+                                   workers=[worker], allow_other_workers=True)
+            in_flight[future] = (task, worker)
+            stream.add(future)
+    try:
+        top_up()
+        for future in stream:
+            task, worker = in_flight.pop(future)
+            dispatch.done(worker)
+            record(task.key, _fields(future))
+            future.release()
+            top_up()
+    finally:
+        if in_flight:  # Ctrl-C or an error: the rows not recorded are left to --resume
+            client.cancel(list(in_flight))
+
+
+class _Dispatch:
+    """Which row goes where next: at most :data:`IN_FLIGHT_PER_THREAD` tasks per worker thread
+    in flight, and the rows of one seed to one worker while it has some left.
+
+    The rows of a seed share its calibration log and the fits on it, and the rows of a
+    scored case its simulation; a worker's memo reuses them only if they land there. So a
+    worker takes the next row of the seed it owns, else the next seed no one owns, else a
+    row of the seed with the most rows left (the tail of a run, rather than idling). The
+    placement is a preference (``allow_other_workers``): the scheduler still moves a task
+    whose worker is lost.
+    """
+
+    def __init__(self, client, tasks: list):
+        self.client = client
+        self.groups: dict = {}
+        for task in tasks:
+            self.groups.setdefault(task.key.seed, collections.deque()).append(task)
+        self.owner: dict = {}
+        self.busy: collections.Counter = collections.Counter()
+        self.threads: dict = {}
+        self.read_at = -1e9
+
+    def take(self) -> list[tuple]:
+        """``(task, worker address)`` pairs to submit now."""
+        self._refresh()
+        picked = []
+        for worker, threads in self.threads.items():
+            while self.busy[worker] < IN_FLIGHT_PER_THREAD * threads:
+                task = self._next_for(worker)
+                if task is None:
+                    break
+                self.busy[worker] += 1
+                picked.append((task, worker))
+        return picked
+
+    def done(self, worker: str) -> None:
+        self.busy[worker] -= 1
+
+    def _next_for(self, worker: str):
+        mine = [g for g, w in self.owner.items() if w == worker and self.groups.get(g)]
+        if not mine:
+            free = [g for g, rows in self.groups.items() if rows and self.owner.get(g) not in self.threads]
+            if free:
+                self.owner[free[0]] = worker
+                mine = free[:1]
+        if not mine:
+            left = [g for g, rows in self.groups.items() if rows]
+            if not left:
+                return None
+            mine = [max(left, key=lambda g: len(self.groups[g]))]
+        return self.groups[mine[0]].popleft()
+
+    def _refresh(self) -> None:
+        """Re-read the workers (they may join or leave during a run) every few seconds."""
+        if time.monotonic() - self.read_at > THREADS_REFRESH_S:
+            self.threads = {w: max(1, n) for w, n in self.client.nthreads().items()}
+            self.read_at = time.monotonic()
+
+
+def _fields(future) -> dict:
+    """The row's fields, or the reason the cluster could not produce them (one line)."""
+    from distributed import KilledWorker
+
+    if future.status == "finished":
+        return future.result()
+    if future.status != "error":  # cancelled or lost: the cluster, not the row, failed
+        return {"status": "error", "message": f"{ENVIRONMENT}the cluster {future.status} the row's "
+                                              f"task (scheduler lost?)"}
+    exc = future.exception()
+    if isinstance(exc, KilledWorker):
+        return {"status": "error", "message": f"{ENVIRONMENT}dask worker lost: {_one_line(exc)}"[:500]}
+    return {"status": "error", "message": f"dask task failed: {_one_line(exc)}"[:500]}
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+# ----------------------------------------------------------------------------- on the worker
+
+_memo_lock = threading.Lock()
+_memo: collections.OrderedDict = collections.OrderedDict()
+_memo_root: list = []
+
+
+def remote_row(task, blas_threads: int | None = None) -> dict:
+    """The task run on a worker: one row, as :func:`rippleb.executors.run_task` runs it.
+
+    ``blas_threads`` is the client's OpenBLAS thread count: dask's nanny starts workers
+    with ``OPENBLAS_NUM_THREADS=1`` (``distributed.nanny.pre-spawn-environ``), and a BLAS
+    call split over another number of threads sums in another order, so a method using
+    BLAS would differ from a local run in its last bits. The worker takes the client's
+    count (the row's forked processes inherit it).
+
+    :class:`rippleb.pool.Pool` starts each job with ``os.fork``, not ``multiprocessing``:
+    a dask worker process is *daemonic* (its nanny starts it with ``daemon=True``) and
+    ``multiprocessing.Process.start`` refuses children of a daemonic process ("daemonic
+    processes are not allowed to have children"), but that check is multiprocessing's
+    own; a plain fork is not subject to it, and the pool's keeper then reaps and kills
+    everything the row started, as locally. The forked keeper is single-threaded (only
+    the forking thread survives a fork), which its PID namespace needs.
+    """
+    from rippleb.executors import run_task
+
+    if blas_threads:
+        openblas_threads(blas_threads)
+    cache = _task_dir()
+    with _memo_lock:
+        memo = dict(_memo)
+    try:
+        fields = run_task(task, cache, _registry(), memo)
+    finally:
+        with _memo_lock:
+            _remember(memo)
+    return fields
+
+
+@functools.lru_cache(maxsize=1)
+def _registry():
+    """The methods this worker can load (its own environment's entry points), found once."""
+    from rippleb.registry import Registry
+
+    return Registry.discover()
+
+
+def _task_dir():
+    """A fresh directory for one task's files, under this process's private root."""
+    from pathlib import Path
+
+    with _memo_lock:
+        if not _memo_root:
+            root = tempfile.mkdtemp(prefix="rippleb-worker-")
+            atexit.register(shutil.rmtree, root, ignore_errors=True)
+            _memo_root.append(root)
+    path = Path(_memo_root[0]) / uuid.uuid4().hex
+    path.mkdir()
+    return path
+
+
+def _remember(memo: dict) -> None:
+    """Keep the newest :data:`MEMO_CASES` cases (and the fits on them); delete the rest's files."""
+    import os
+
+    for key, value in memo.items():
+        _memo[key] = value
+        _memo.move_to_end(key)
+    cases = [k for k in _memo if hasattr(k, "role")]
+    for old in cases[:max(0, len(cases) - MEMO_CASES)]:
+        artefact = _memo.pop(old)[0]
+        with contextlib.suppress(OSError):
+            os.unlink(artefact.path)
+        for fit in [k for k in _memo if getattr(k, "calibration", None) == old]:
+            with contextlib.suppress(OSError):
+                os.unlink(_memo.pop(fit)["fitted"]["path"])
+
+
+def openblas_threads(set_to: int | None = None) -> int | None:
+    """The thread count of the OpenBLAS libraries numpy and scipy loaded (None if none),
+    after setting it to ``set_to`` if given (as threadpoolctl does, without the dependency)."""
+    import ctypes
+
+    import numpy  # noqa: F401 - load both BLAS libraries before reading or setting them
+    import scipy.linalg  # noqa: F401
+
+    counts = []
+    for path in _loaded_openblas():
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for suffix in ("64_", ""):
+            getter = getattr(lib, f"scipy_openblas_get_num_threads{suffix}", None) \
+                or getattr(lib, f"openblas_get_num_threads{suffix}", None)
+            setter = getattr(lib, f"scipy_openblas_set_num_threads{suffix}", None) \
+                or getattr(lib, f"openblas_set_num_threads{suffix}", None)
+            if getter is None or setter is None:
+                continue
+            if set_to is not None:
+                setter(ctypes.c_int(int(set_to)))
+            counts.append(int(getter()))
+            break
+    return max(counts) if counts else None
+
+
+def _loaded_openblas() -> list[str]:
+    try:
+        with open("/proc/self/maps") as fh:
+            paths = {line.split()[-1] for line in fh if "/" in line}
+    except OSError:
+        return []
+    return sorted(p for p in paths if "openblas" in p.rsplit("/", 1)[-1].lower())

@@ -1,0 +1,97 @@
+"""The pieces of the Dask executor that need no cluster: a row as a self-contained task, the
+worker's memo, lost workers as statuses, and the BLAS thread count."""
+
+from types import SimpleNamespace
+
+import pandas as pd
+import pytest
+
+from rippleb.dask_executor import _fields, openblas_threads
+from rippleb.executors import RowTask, run_task
+from rippleb.registry import Registry
+from rippleb.rows import RowKey
+from rippleb.runner import run
+from rippleb.scenario import load_scenario
+
+ACCURACY = ["rms_error_nm", "max_error_nm", "rms_error_ref_nm", "delay_ms", "stopped_rms_error_nm"]
+
+
+def _task(method, seed, run_id="t"):
+    return RowTask(RowKey(method, "stop-restart", "same-session", seed), load_scenario("stop-restart"),
+                   load_scenario("calibration"), 120.0, 4096.0, run_id)
+
+
+def test_a_task_is_the_local_row_and_reuses_its_cases(tmp_path):
+    local = run("raw,lowpass", "stop-restart", [3], jobs=1)
+    memo, registry = {}, Registry.discover()
+    (tmp_path / "a").mkdir()
+    first = run_task(_task("raw", 3), tmp_path / "a", registry, memo)
+    (tmp_path / "b").mkdir()
+    second = run_task(_task("lowpass", 3), tmp_path / "b", registry, memo)
+    for fields, method in ((first, "raw"), (second, "lowpass")):
+        row = local[local["method"] == method].iloc[0]
+        assert fields["status"] == "ok"
+        assert [fields[c] for c in ACCURACY] == [row[c] for c in ACCURACY]
+        assert fields["scenario_sha256"] == row["scenario_sha256"]
+        for key_column in ("method", "scenario", "condition", "seed", "run_id"):
+            assert key_column not in fields  # the client's key is the authority
+    # the second row of the same case simulated nothing: its files were the first row's
+    assert not any((tmp_path / "b").glob("case-*"))
+    assert any((tmp_path / "a").glob("case-*"))
+
+
+def test_a_task_whose_memo_files_vanished_simulates_again(tmp_path):
+    memo, registry = {}, Registry.discover()
+    (tmp_path / "a").mkdir()
+    first = run_task(_task("raw", 1), tmp_path / "a", registry, memo)
+    for path in (tmp_path / "a").iterdir():
+        path.unlink()
+    (tmp_path / "b").mkdir()
+    again = run_task(_task("raw", 1), tmp_path / "b", registry, memo)
+    assert again["rms_error_nm"] == first["rms_error_nm"]
+    assert any((tmp_path / "b").glob("case-*"))
+
+
+class _Future:
+    def __init__(self, status, exc=None, result=None):
+        self.status, self._exc, self._result = status, exc, result
+
+    def exception(self):
+        return self._exc
+
+    def result(self):
+        return self._result
+
+
+def test_a_task_that_killed_its_workers_is_an_environmental_error_naming_the_worker():
+    from distributed import KilledWorker
+
+    # the scheduler sends the last worker's state; its address is what the row must name
+    exc = KilledWorker("rippleb-row-1", SimpleNamespace(address="tcp://10.0.0.7:40000"), allowed_failures=3)
+    fields = _fields(_Future("error", exc))
+    assert fields["status"] == "error"
+    assert fields["message"].startswith("environment: dask worker lost")
+    assert "tcp://10.0.0.7:40000" in fields["message"]
+    cancelled = _fields(_Future("cancelled"))
+    assert cancelled["message"].startswith("environment: the cluster cancelled")
+    failed = _fields(_Future("error", RuntimeError("boom")))
+    assert failed == {"status": "error", "message": "dask task failed: RuntimeError: boom"}
+
+
+def test_openblas_threads_can_be_set_and_read_back():
+    before = openblas_threads()
+    if before is None:
+        pytest.skip("numpy and scipy do not use OpenBLAS here")
+    try:
+        assert openblas_threads(1) == 1
+    finally:
+        assert openblas_threads(before) == before
+
+
+def test_run_sweep_rows_have_a_column_per_parameter_and_distinct_keys():
+    from rippleb.sweep import run_sweep
+
+    frame = run_sweep({"joint.counts_per_rev": [500, 2500]}, "raw", "stop-restart", [0], jobs=2)
+    assert list(frame["joint.counts_per_rev"]) == [500, 2500]
+    assert frame["scenario_sha256"].nunique() == 2
+    assert isinstance(frame, pd.DataFrame) and (frame["status"] == "ok").all()

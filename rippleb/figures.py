@@ -241,6 +241,7 @@ def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
     """
     from rippleb.conditions import DEFAULT_CONDITION
     from rippleb.provenance import seeds_text
+    from rippleb.results import swept_columns
     from rippleb.stats import method_order, with_condition
 
     if fmt not in FORMATS:
@@ -261,8 +262,10 @@ def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
     if methods and scenarios:
         signals, more = _signals_of_seed(methods, scenarios, seed)
         warnings += more
-        for scenario in scenarios:
-            warnings += _check_against_rows(signals[scenario], ok, scenario, seed)
+        # a sweep's rows ran at swept values, not the built-in scenario re-simulated here
+        if not swept_columns(frame.columns):
+            for scenario in scenarios:
+                warnings += _check_against_rows(signals[scenario], ok, scenario, seed)
         if keep is not None:
             keep.update(signals)
     if "paper-quintic" in signals:

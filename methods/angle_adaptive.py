@@ -107,44 +107,90 @@ def first_index_count(encoder: np.ndarray, index: np.ndarray | None) -> int | No
     return int(encoder[hits[0]]) if len(hits) else None
 
 
+@compiled(types.void(F8_2D_C, F8_2D_C))
+def cholesky(A, L):
+    """Lower Cholesky factor ``L`` of the symmetric positive definite ``A`` (``A = L L'``).
+
+    Written out rather than ``np.linalg.cholesky``: at the map's 30 x 30 the LAPACK call's
+    overhead is larger than the arithmetic. Only the lower triangle of ``L`` is written.
+    """
+    for j in range(A.shape[0]):
+        total = A[j, j]
+        for k in range(j):
+            total -= L[j, k] * L[j, k]
+        L[j, j] = np.sqrt(total)
+        for i in range(j + 1, A.shape[0]):
+            total = A[i, j]
+            for k in range(j):
+                total -= L[i, k] * L[j, k]
+            L[i, j] = total / L[j, j]
+
+
+@compiled(types.void(F8_2D_C, F8_C))
+def forward_substitute(L, x):
+    """``x <- L^-1 x`` for the lower triangular ``L``, in place."""
+    for i in range(len(x)):
+        total = x[i]
+        for k in range(i):
+            total -= L[i, k] * x[k]
+        x[i] = total / L[i, i]
+
+
+@compiled(types.void(F8_2D_C, F8_C))
+def backward_substitute(L, x):
+    """``x <- L'^-1 x`` for the lower triangular ``L``, in place."""
+    for i in range(len(x) - 1, -1, -1):
+        total = x[i]
+        for k in range(i + 1, len(x)):
+            total -= L[k, i] * x[k]
+        x[i] = total / L[i, i]
+
+
 @compiled(types.void(F8_2D_C, F8, types.float64, IN_F8, IN_F8, F8_2D_C, F8))
-def solve(info, vec, weight, scale, prior_map, cov, w):
-    """``w = C (d + pi S w_cal)`` with ``C = (D + pi S)^-1``, into ``cov`` and ``w``.
+def solve(info, vec, weight, scale, prior_map, chol, w):
+    """``w = C (d + pi S w_cal)`` with ``C = (D + pi S)^-1``; ``chol`` the factor of ``D + pi S``.
 
     ``S`` (``scale``) is diagonal: 1 for the no-load coefficients, the rated torque squared
     for the load terms, so ``prior_sd_nm`` and ``floor_sd_nm`` are both in Nm of ripple at
     rated load. ``S`` is constant over each (cos, sin) pair of every block, so re-homing
-    rotations leave it unchanged.
+    rotations leave it unchanged. The covariance ``C`` is kept as the Cholesky factor of
+    its inverse (``C = L'^-1 L^-1``): the gate needs only ``psi' C psi = |L^-1 psi|^2``.
     """
     A = info.copy()
     for i in range(len(scale)):
         A[i, i] += weight * scale[i]
-    cov[:, :] = np.linalg.inv(A)
-    w[:] = cov @ (vec + weight * scale * prior_map)
+    cholesky(A, chol)
+    rhs = vec + weight * scale * prior_map
+    forward_substitute(chol, rhs)
+    backward_substitute(chol, rhs)
+    w[:] = rhs
 
 
 @compiled(types.boolean(F8_C, types.float64, F8, F8_2D_C, IN_F8))
-def consistent(psi, z, w, cov, law):
+def consistent(psi, z, w, chol, law):
     """Innovation gate: False for a tick no ripple within the map's uncertainty explains.
 
     The innovation ``z - psi . w`` of the current map is compared with ``outlier_gate``
     standard deviations of its predicted spread, ``r + psi' C psi`` (``C`` the
-    covariance of the map): the usual chi-square gate of a Kalman filter. An unknown
-    torque step (load-steps: 15 Nm in 10 ms gives second differences of 0.8 Nm per tick)
-    fails it; a map that is still uncertain (warm start, or after a long rest nothing
-    was learned in) has a wide gate. Forgetting runs on revolutions whether ticks pass
-    or not, so a map the gate has locked out widens its own gate again.
+    covariance of the map, from its factor ``chol``, see :func:`solve`): the usual
+    chi-square gate of a Kalman filter. An unknown torque step (load-steps: 15 Nm in
+    10 ms gives second differences of 0.8 Nm per tick) fails it; a map that is still
+    uncertain (warm start, or after a long rest nothing was learned in) has a wide gate.
+    Forgetting runs on revolutions whether ticks pass or not, so a map the gate has
+    locked out widens its own gate again.
     """
-    spread, innovation = law[LAW_R], z
+    innovation = z
     for a in range(len(psi)):
         innovation -= psi[a] * w[a]
-        spread += psi[a] * (cov[a] @ psi)
+    whitened = psi.copy()
+    forward_substitute(chol, whitened)
+    spread = law[LAW_R] + whitened @ whitened
     return innovation * innovation <= law[LAW_GATE] ** 2 * spread
 
 
 @compiled(types.void(F8_2D_C, F8, I8, types.int64, IN_F8, IN_F8, IN_F8, F8, F8_2D_C, F8_2D_C,
                      F8, F8))
-def learn_period(ticks_phi, ticks_y, ticks_end, history, law, scale, prior_map, w, cov, info,
+def learn_period(ticks_phi, ticks_y, ticks_end, history, law, scale, prior_map, w, chol, info,
                  vec, scalars):
     """Fold one update period of ticks into the information, then re-solve the map.
 
@@ -194,7 +240,7 @@ def learn_period(ticks_phi, ticks_y, ticks_end, history, law, scale, prior_map, 
         jolt = abs(ticks_end[j] - 2 * ticks_end[j - 1] + ticks_end[j - 2])
         turned += last
         if moved >= law[LAW_MIN_COUNTS] and jolt <= law[LAW_MAX_JOLT] and \
-                consistent(psi, z, w, cov, law):
+                consistent(psi, z, w, chol, law):
             for a in range(n):
                 inner[a] += psi[a] * z
                 for b in range(n):
@@ -203,7 +249,7 @@ def learn_period(ticks_phi, ticks_y, ticks_end, history, law, scale, prior_map, 
     info[:, :] = decay * info + outer / law[LAW_R]
     vec[:] = decay * vec + inner / law[LAW_R]
     scalars[0] = decay * scalars[0] + (1.0 - decay) * law[LAW_FLOOR_INFO]
-    solve(info, vec, scalars[0], scale, prior_map, cov, w)
+    solve(info, vec, scalars[0], scale, prior_map, chol, w)
     last_two = len(ticks_y) - 2
     ticks_phi[:2, :] = ticks_phi[last_two:].copy()
     ticks_y[:2] = ticks_y[last_two:].copy()
@@ -214,7 +260,7 @@ def learn_period(ticks_phi, ticks_y, ticks_end, history, law, scale, prior_map, 
                      types.int64, types.int64, types.boolean, IN_F8, IN_F8, IN_F8, F8, F8_2D_C,
                      F8_2D_C, F8, F8, I8, F8, F8_2D_C, F8, I8))
 def stream(strain, encoder, out, gain, offset, frame, orders, table, tick, update_ticks, adapt,
-           law, scale, prior_map, w, cov, info, vec, scalars, counters, tick_phi, ticks_phi,
+           law, scale, prior_map, w, chol, info, vec, scalars, counters, tick_phi, ticks_phi,
            ticks_y, ticks_end):
     """Subtract the current map from every sample; with ``adapt``, learn on the way.
 
@@ -259,7 +305,7 @@ def stream(strain, encoder, out, gain, offset, frame, orders, table, tick, updat
         strain_sum, in_tick, in_period = 0.0, 0, in_period + 1
         if in_period == update_ticks:
             learn_period(ticks_phi, ticks_y, ticks_end, counters[2], law, scale, prior_map, w,
-                         cov, info, vec, scalars)
+                         chol, info, vec, scalars)
             counters[2] = 1
             in_period = 0
     scalars[1], counters[0], counters[1] = strain_sum, in_tick, in_period
@@ -376,7 +422,8 @@ class AngleAdaptive(Method):
         self.vec_ = np.zeros(n)         # data information vector (d)
         # [prior weight pi (rho, forgets towards delta), strain sum of the open tick]
         self.scalars_ = np.array([1.0 / self.prior_sd_nm ** 2, 0.0])
-        self.cov_ = np.diag(1.0 / (self.scalars_[0] * self.scale_))
+        # lower Cholesky factor of the map's information D + pi S (see solve)
+        self.chol_ = np.diag(np.sqrt(self.scalars_[0] * self.scale_))
         # [samples in the open tick, complete ticks in the open period, history present]
         self.counters_ = np.zeros(3, dtype=np.int64)
         self.tick_phi_ = np.zeros(m)    # regressor sums of the open tick
@@ -405,7 +452,7 @@ class AngleAdaptive(Method):
     def _stream(self, strain, encoder, out) -> None:
         stream(strain, encoder, out, self.gain_, self.offset_, self.frame_, self.orders_,
                self.table_, int(self.spec_.block_size), int(self.update_ticks), bool(self.adapt),
-               self.law_, self.scale_, self.map_, self.w_, self.cov_, self.info_, self.vec_,
+               self.law_, self.scale_, self.map_, self.w_, self.chol_, self.info_, self.vec_,
                self.scalars_, self.counters_, self.tick_phi_, self.ticks_phi_, self.ticks_y_,
                self.ticks_end_)
 
@@ -437,7 +484,7 @@ class AngleAdaptive(Method):
         self.ticks_phi_[:] = self.ticks_phi_ @ T[:m, :m].T
         self.tick_phi_[:] = T[:m, :m] @ self.tick_phi_
         if self.adapt:
-            solve(self.info_, self.vec_, self.scalars_[0], self.scale_, self.map_, self.cov_,
+            solve(self.info_, self.vec_, self.scalars_[0], self.scale_, self.map_, self.chol_,
                   self.w_)
         else:
             self.w_[:] = self.map_

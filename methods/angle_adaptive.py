@@ -37,13 +37,12 @@ import numpy as np
 from numba import types
 
 from rippleb.data import JointSpec, SensorBlock, SensorLog
-from rippleb.dsp import F8, IN_F8, IN_I8, compiled
+from rippleb.dsp import (F8, F8_2D_C, F8_C, IN_F8, IN_I8, backward_substitute, cholesky, compiled,
+                         forward_substitute)
 from rippleb.method import Method
 
 IN_C16 = types.Array(types.complex128, 1, "A", readonly=True)
 I8 = types.int64[:]
-F8_C = types.float64[::1]
-F8_2D_C = types.float64[:, ::1]
 
 
 def phasor_table(counts_per_rev: int) -> np.ndarray:
@@ -105,45 +104,6 @@ def first_index_count(encoder: np.ndarray, index: np.ndarray | None) -> int | No
         return None
     hits = np.flatnonzero(index)
     return int(encoder[hits[0]]) if len(hits) else None
-
-
-@compiled(types.void(F8_2D_C, F8_2D_C))
-def cholesky(A, L):
-    """Lower Cholesky factor ``L`` of the symmetric positive definite ``A`` (``A = L L'``).
-
-    Written out rather than ``np.linalg.cholesky``: at the map's 30 x 30 the LAPACK call's
-    overhead is larger than the arithmetic. Only the lower triangle of ``L`` is written.
-    """
-    for j in range(A.shape[0]):
-        total = A[j, j]
-        for k in range(j):
-            total -= L[j, k] * L[j, k]
-        L[j, j] = np.sqrt(total)
-        for i in range(j + 1, A.shape[0]):
-            total = A[i, j]
-            for k in range(j):
-                total -= L[i, k] * L[j, k]
-            L[i, j] = total / L[j, j]
-
-
-@compiled(types.void(F8_2D_C, F8_C))
-def forward_substitute(L, x):
-    """``x <- L^-1 x`` for the lower triangular ``L``, in place."""
-    for i in range(len(x)):
-        total = x[i]
-        for k in range(i):
-            total -= L[i, k] * x[k]
-        x[i] = total / L[i, i]
-
-
-@compiled(types.void(F8_2D_C, F8_C))
-def backward_substitute(L, x):
-    """``x <- L'^-1 x`` for the lower triangular ``L``, in place."""
-    for i in range(len(x) - 1, -1, -1):
-        total = x[i]
-        for k in range(i + 1, len(x)):
-            total -= L[k, i] * x[k]
-        x[i] = total / L[i, i]
 
 
 @compiled(types.void(F8_2D_C, F8, types.float64, IN_F8, IN_F8, F8_2D_C, F8))
@@ -412,9 +372,9 @@ class AngleAdaptive(Method):
         m = 2 * len(self.orders_)
         U = int(self.update_ticks)
         self.scale_ = np.concatenate([np.ones(m), np.full(2 * m, float(spec.rated_torque) ** 2)])
-        self.law_ = np.array([self.r_, float(self.outlier_gate), self.cpr_ * float(self.memory_revs),
-                              1.0 / self.floor_sd_nm ** 2, float(self.min_counts),
-                              float(self.max_jolt_counts)])
+        self.law_ = np.array([self.r_, float(self.outlier_gate),
+                              self.cpr_ * float(self.memory_revs), 1.0 / self.floor_sd_nm ** 2,
+                              float(self.min_counts), float(self.max_jolt_counts)])
         self.frame_ = self.home_ or 0   # angle origin in counts; the calibration's until homed
         self.homed_ = self.home_ is None  # nothing to home on without a calibration index
         self.w_ = self.map_.copy()

@@ -10,8 +10,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rippleb.data import JointSpec, make_log
-from rippleb.methods.angle_adaptive import (AngleAdaptive, AngleAdaptiveFrozen, angle_regressors,
-                                            map_rows, phasor_table, ripple, rotation)
+from rippleb.dsp import backward_substitute, cholesky, forward_substitute
+from rippleb.methods.angle_adaptive import (LAW_GATE, LAW_R, AngleAdaptive, AngleAdaptiveFrozen,
+                                            angle_regressors, consistent, map_rows, phasor_table,
+                                            ripple, rotation, solve)
 from rippleb.testing import check_method, default_logs
 
 ORDERS = np.array([1, 2, 4, 6, 8])
@@ -194,3 +196,46 @@ def test_torque_step_while_moving_is_not_learned():
         drift[gate] = np.abs(method.w_[:10] - method.map_[:10]).max()
     assert drift[4.0] < 0.05
     assert drift[np.inf] > 2 * drift[4.0]
+
+
+def random_information(seed, n=30):
+    """A symmetric positive definite information matrix as the law builds it (sum of rows)."""
+    rng = np.random.default_rng(seed)
+    rows = rng.normal(size=(n + 5, n)) * rng.uniform(0.01, 10.0, size=n)
+    return rows.T @ rows, rng
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), n=st.integers(1, 30))
+def test_cholesky_and_substitutions_invert_the_matrix(seed, n):
+    A, rng = random_information(seed, n)
+    A += np.eye(n)
+    L = np.zeros((n, n))
+    cholesky(A, L)
+    np.testing.assert_allclose(L @ L.T, A, rtol=1e-10, atol=1e-10 * np.abs(A).max())
+    x = rng.normal(size=n)
+    v = x.copy()
+    forward_substitute(L, v)
+    np.testing.assert_allclose(L @ v, x, rtol=1e-9, atol=1e-9)
+    backward_substitute(L, v)
+    np.testing.assert_allclose(v, np.linalg.solve(A, x), rtol=1e-8, atol=1e-8)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_solve_and_gate_follow_the_dense_formulas(seed):
+    """``w = (D + pi S)^-1 (d + pi S w_cal)`` and the gate ``e^2 <= g^2 (r + psi' C psi)``."""
+    info, rng = random_information(seed)
+    vec, prior_map = rng.normal(size=30), rng.normal(size=30)
+    weight, scale = 2.5, np.concatenate([np.ones(10), np.full(20, 40.0 ** 2)])
+    chol, w = np.zeros((30, 30)), np.zeros(30)
+    solve(info, vec, weight, scale, prior_map, chol, w)
+    cov = np.linalg.inv(info + np.diag(weight * scale))
+    np.testing.assert_allclose(w, cov @ (vec + weight * scale * prior_map), rtol=1e-9, atol=1e-12)
+    law = np.array([1e-4, 4.0, 1e5, 1.0, 2.0, 2.0])
+    for _ in range(50):
+        psi = rng.normal(size=30) * 0.1
+        spread = law[LAW_R] + psi @ cov @ psi
+        bound = law[LAW_GATE] * np.sqrt(spread)
+        for margin in (0.99, 1.01):  # just inside and just outside the gate
+            z = psi @ w + margin * bound
+            assert consistent(psi, z, w, chol, law) == (margin < 1.0)

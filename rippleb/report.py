@@ -24,6 +24,7 @@ from rippleb.errors import InputError
 from rippleb.files import atomic_path
 from rippleb.provenance import (collect_provenance, git_state, provenance_markdown,  # noqa: F401
                                 read_run_provenance, seeds_text)
+from rippleb.results import swept_columns
 from rippleb.stats import (CONFIDENCE, METHOD_ORDER, fmt_interval, interval_frame,  # noqa: F401
                            method_order, scenario_order, t_interval, with_condition)
 from rippleb.table_one import (PAPER_CITATION, PAPER_TABLE_I, TABLE_I_METHODS,  # noqa: F401
@@ -218,15 +219,19 @@ def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, arg
         prov[f"rows_{col}"] = ", ".join(values) or "not recorded"
     prov["run_dir"] = str(run_dir)
     drawn, warnings, signals = {}, [], {}
-    if figures:
+    if figures and swept_columns(frame.columns):
+        # a sweep is read through error against each swept parameter; the signal figures
+        # would show the built-in scenarios at values the sweep did not hold fixed
+        from rippleb.sweep_report import figures as sweep_figures
+
+        drawn = sweep_figures(frame, out / "figures")
+    elif figures:
         from rippleb import figures as figs
 
         seeds = sorted(int(s) for s in frame["seed"].unique())
         drawn, warnings = figs.draw_all(frame, out / "figures", seed=figure_seed, fmt=figure_format,
                                         speed_seeds=seeds[:speed_seeds] if speed_seeds else seeds,
                                         keep=signals)
-        from rippleb.sweep_report import figures as sweep_figures  # one per swept column, if any
-        drawn.update(sweep_figures(frame, out / "figures"))
     prov["figure_seed"] = figure_seed if figures else None
     # A byte copy, not a rewrite: re-printing parsed floats could change their last digit,
     # and tests/test_published.py compares them exactly.

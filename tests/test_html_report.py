@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 
 from rippleb import html_report
+from rippleb.metrics import METRIC_COLUMNS
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -33,7 +34,8 @@ def conditions_frame(seeds=4):
                                  "rms_error_nm": level * (1 + 0.05 * rng.standard_normal()),
                                  "max_error_nm": 3 * level, "rms_error_ref_nm": level, "max_error_ref_nm": 3 * level,
                                  "delay_ms": 1.0, "us_per_tick_p50": 5.0, "us_per_tick_p99": 12.0})
-    return pd.DataFrame(rows)
+    # every metric column a results file has (the reader refuses a file without one)
+    return pd.DataFrame(rows).reindex(columns=list(dict.fromkeys([*rows[0], *METRIC_COLUMNS])))
 
 
 PROV = {"run": {"command": "rippleb run", "jobs": 2, "cpu_count": 2}, "report": {"command": "rippleb report"},

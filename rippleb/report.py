@@ -130,16 +130,24 @@ def _plain(value):
 READING_SIMULATED = """## Reading these tables
 
 - Every number comes from the simulator (`docs/physics.md`), not from a real joint. Its
-  ripple is periodic in the wave-generator angle, with amplitudes affine in the load and a
-  small load-dependent phase. Under `same-session` that is the very structure
-  `kalman-ripple` identifies on the calibration log of the same device, so its result there
-  is the best case for model-based cancellation; the other conditions (a power cycle,
-  ageing, re-assembly) show what happens when the device has changed since calibration.
+  ripple has the wave-generator orders 1, 2, 4, 6 and 8 with amplitudes affine in the load
+  and a small load-dependent phase, plus components locked to the output angle and strain
+  hysteresis. Under `same-session` the wave-generator part is exactly what the
+  calibration-map methods (`kalman-ripple`, `angle-adaptive-frozen`) identify on the
+  calibration log of the same device, so their result there is the best case for
+  model-based cancellation. The other conditions show what happens when the device has
+  changed since calibration: a power cycle loses the absolute angle until the first index
+  pulse, ageing drifts the map, re-assembly redraws it (`docs/physics.md`, "Deployment
+  conditions").
+- `torque_ref` (Table I's reference) is the paper's eq. (7) on the desired trajectory with
+  a nominal arm model whose masses and inertias differ from the simulated arm's by a few
+  per cent, as an identification leaves them.
 - `order-tracking` switches to the dead zone when no encoder position is crossed within
   its trigger timeout, chosen on the calibration scenario (`docs/methods/order-tracking.md`).
-- `delay_ms` is the lag that best correlates estimate and truth. On slowly varying torque
-  (`creep`, `paper-quintic`) the correlation is flat over many lags, so wide intervals
-  there mean an ill-defined lag, not a slow method.
+- `delay_ms` is the lag that best correlates estimate and truth, `n/a` where the
+  correlation peak is not distinct (slowly varying torque); `step_latency_ms` and
+  `bandwidth_hz` measure latency and bandwidth where the scenario defines them
+  (`docs/metrics.md`).
 - Timing columns depend on the machine and its load; compare methods within one run."""
 
 READING_RECORDED = """## Reading these tables

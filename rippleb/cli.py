@@ -39,6 +39,10 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"rippleb: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        # the reader went away (`rippleb list | head`): stop quietly, like any Unix filter
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
     except KeyboardInterrupt:
         print(f"rippleb: interrupted{_what_was_kept(getattr(args, 'out_dir', None) if getattr(args, 'started', False) else None, getattr(args, 'command', 'run'))}", file=sys.stderr)
         return 130

@@ -235,8 +235,9 @@ def test_interrupt_keeps_the_finished_rows(fake, tmp_path, signum, sigint_raises
 
     threading.Thread(target=interrupt_after_two_rows, daemon=True).start()
     with pytest.raises(KeyboardInterrupt):
+        # a bounded timeout: a signal that never arrives fails the test instead of hanging it
         rippleb.run(methods="raw,perfect,sleeps", scenarios="paper-quintic", seeds=1, jobs=1,
-                    out=tmp_path, timeout=None)
+                    out=tmp_path, timeout=150)
     disk = pd.read_csv(tmp_path / "results.csv")
     assert sorted(disk.method) == ["perfect", "raw"] and (disk.status == "ok").all()
 

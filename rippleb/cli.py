@@ -290,13 +290,19 @@ def probe_plugins(registry, timeout: float) -> tuple[dict[str, str], dict[str, s
 
 def cmd_run(args) -> int:
     """``rippleb run``."""
+    return recorded(args, _run)
+
+
+def recorded(args, body) -> int:
+    """Run ``body(args, start)`` (a run or a sweep) and record its provenance, with whether
+    it completed, in the run directory however it ends."""
     from rippleb.provenance import collect_provenance
 
     start = time.perf_counter()
     provenance = collect_provenance(args.argv)
     completed = False
     try:
-        status = _run(args, start)
+        status = body(args, start)
         completed = True
         return status
     finally:

@@ -75,19 +75,9 @@ def add_sweep(sub) -> None:
 
 def cmd_sweep(args) -> int:
     """``rippleb sweep``."""
-    from rippleb.cli import _record_run
-    from rippleb.report import collect_provenance
+    from rippleb.cli import recorded
 
-    start = time.perf_counter()
-    provenance = collect_provenance(args.argv)
-    completed = False
-    try:
-        status = _sweep(args, start)
-        completed = True
-        return status
-    finally:
-        provenance["completed"] = completed
-        _record_run(args, provenance, time.perf_counter() - start)
+    return recorded(args, _sweep)
 
 
 def _sweep(args, start: float) -> int:

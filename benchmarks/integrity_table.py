@@ -17,7 +17,6 @@ import signal
 import subprocess
 import sys
 import tempfile
-import textwrap
 import time
 from pathlib import Path
 
@@ -26,17 +25,8 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from test_integrity import HOSTILE, NAPPER, SLOW_IMPORT, _dist  # noqa: E402
+from test_integrity_inputs import SCENARIO  # noqa: E402
 
-SCENARIO = textwrap.dedent("""\
-    [robot]
-    posture = {{ elbow_joint = {posture} }}
-    [trajectory]
-    start = -1.8
-    [[trajectory.segment]]
-    kind = "move"
-    by = {by}
-    duration = {duration}
-    """)
 RUN = ["run", "--seeds", "1", "--jobs", "2", "--no-progress"]
 
 

@@ -18,6 +18,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from test_bad_input import _dist  # a minimal installed distribution without pip
+
 pytestmark = pytest.mark.slow
 
 HOSTILE = textwrap.dedent('''
@@ -143,15 +145,6 @@ NAPPER = textwrap.dedent('''
 ''')
 SLOW_IMPORT = "import time\ntime.sleep(3600)\n"
 EXITS = "raise SystemExit(3)\n"
-
-
-def _dist(site: Path, dist: str, module: str, source: str, entry_points: dict[str, str]):
-    info = site / f"{dist.replace('-', '_')}-0.1.dist-info"
-    info.mkdir(parents=True)
-    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text(
-        "[rippleb.methods]\n" + "".join(f"{k} = {module}:{v}\n" for k, v in entry_points.items()))
-    (site / f"{module}.py").write_text(source)
 
 
 @pytest.fixture(scope="module")

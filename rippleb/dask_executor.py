@@ -93,6 +93,8 @@ class DaskExecutor:
 def _stream(client, tasks: list, record) -> None:
     from distributed import as_completed
 
+    from rippleb.scheduler import check_interrupted
+
     client.wait_for_workers(1)
     dispatch = _Dispatch(client, tasks)
     stream = as_completed()
@@ -108,6 +110,7 @@ def _stream(client, tasks: list, record) -> None:
     try:
         top_up()
         for future in stream:
+            check_interrupted()
             task, worker = in_flight.pop(future)
             dispatch.done(worker)
             record(task.key, _fields(future))

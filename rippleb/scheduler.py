@@ -107,8 +107,10 @@ def schedule(pool: Pool, state: State, bar) -> None:
     try:
         while state.pending or pool.busy:
             while pool.free and state.pending:
+                check_interrupted()
                 if not _start_next(pool, state, bar):
                     break
+            check_interrupted()
             for fin in pool.wait():
                 if isinstance(fin.key, tuple):
                     _finish_sim(fin, state)
@@ -318,17 +320,41 @@ def progress_bar(total: int, enabled):
         yield bar
 
 
+#: Signals received while a run is under way (see :func:`sigterm_as_interrupt`).
+_RECEIVED: list[int] = []
+
+
+def check_interrupted() -> None:
+    """Raise ``KeyboardInterrupt`` if an interrupt arrived but its exception was lost.
+
+    Python raises a signal's exception wherever the main thread happens to be; inside a
+    callback whose exceptions are ignored (the at-fork handlers the runner passes through
+    twice per job, a ``__del__``), it is printed and dropped, and the run would go on.
+    The scheduling loops call this between jobs, so no interrupt is lost.
+    """
+    if _RECEIVED:
+        raise KeyboardInterrupt(f"signal {_RECEIVED[0]}")
+
+
 @contextlib.contextmanager
 def sigterm_as_interrupt():
-    """Treat SIGTERM like Ctrl-C, so that both end with the finished rows on disk."""
+    """Treat SIGTERM like Ctrl-C, so that both end with the finished rows on disk, and
+    remember either (:func:`check_interrupted`). A SIGINT that is ignored (a background
+    process) stays ignored."""
     def handler(signum, frame):
+        _RECEIVED.append(signum)
         raise KeyboardInterrupt(f"signal {signum}")
+    _RECEIVED.clear()
     try:
-        previous = signal.signal(signal.SIGTERM, handler)
+        previous = {signal.SIGTERM: signal.signal(signal.SIGTERM, handler)}
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            previous[signal.SIGINT] = signal.signal(signal.SIGINT, handler)
     except ValueError:  # not the main thread: leave signals alone
         yield
         return
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for signum, old in previous.items():
+            signal.signal(signum, old)
+        _RECEIVED.clear()

@@ -2,6 +2,8 @@
 change; ``python -m pytest --full`` adds the tests marked ``slow`` (end-to-end runs,
 installs, the browser, property fuzzing) and is what CI runs (``.ci/run``)."""
 
+import pytest
+
 
 def pytest_addoption(parser):
     parser.addoption("--full", action="store_true",
@@ -21,3 +23,21 @@ def pytest_report_header(config):
     if not (config.getoption("--full") or config.option.markexpr):
         return "fast default: tests marked slow are deselected; run with --full for the whole suite (CI)"
     return None
+
+
+@pytest.fixture
+def register_methods(monkeypatch):
+    """``register_methods(*classes)``: for one test, ``Registry.discover`` also finds these
+    method classes, as plugins, beside whatever it found before."""
+    from rippleb.registry import Entry, Registry
+
+    def register(*classes):
+        real = Registry.discover   # what discover finds now, earlier registrations included
+
+        def discover(registry_cls, group="rippleb.methods"):
+            found = real(group)
+            for method in classes:
+                found.entries[method.name] = Entry(method.name, "plugin", "tests", cls=method)
+            return found
+        monkeypatch.setattr(Registry, "discover", classmethod(discover))
+    return register

@@ -10,7 +10,6 @@ import pytest
 import rippleb
 from rippleb import Method
 from rippleb.metrics import Truth
-from rippleb.registry import Entry, Registry
 from rippleb.runner import evaluate
 from test_runner import fake_simulate
 
@@ -56,19 +55,12 @@ class FitRaises(Method):
 
 
 @pytest.fixture
-def fake(monkeypatch, tmp_path):
+def fake(monkeypatch, tmp_path, register_methods):
     import rippleb.simulator
 
     monkeypatch.setattr(rippleb.simulator, "simulate", fake_simulate)
     monkeypatch.setattr(CountsFits, "calls_file", str(tmp_path / "fits"))
-    real = Registry.discover
-
-    def discover(cls, group="rippleb.methods"):
-        found = real(group)
-        for m in (CountsFits, Unpicklable, FitRaises):
-            found.entries[m.name] = Entry(m.name, "plugin", "tests", cls=m)
-        return found
-    monkeypatch.setattr(Registry, "discover", classmethod(discover))
+    register_methods(CountsFits, Unpicklable, FitRaises)
     return tmp_path / "fits"
 
 

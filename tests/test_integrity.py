@@ -285,27 +285,20 @@ SPAWNS = textwrap.dedent('''
 
 
 @pytest.mark.parametrize("namespaces", [True, False], ids=["pid-namespace", "subreaper-only"])
-def test_no_process_outlives_its_row(tmp_path, monkeypatch, namespaces):
+def test_no_process_outlives_its_row(tmp_path, monkeypatch, namespaces, register_methods):
     """With and without PID namespaces (where the kernel refuses them, the keeper is a
     child subreaper that kills every descendant)."""
     import importlib
 
     import rippleb
     from rippleb import isolation
-    from rippleb.registry import Entry, Registry
 
     (tmp_path / "spawns_mod.py").write_text(SPAWNS)
     monkeypatch.syspath_prepend(str(tmp_path))
     cls = importlib.import_module("spawns_mod").Spawns
     if not namespaces:
         monkeypatch.setattr(isolation, "new_pid_namespace", lambda: False)
-    real = Registry.discover
-
-    def discover(registry_cls, group="rippleb.methods"):
-        found = real(group)
-        found.entries["spawns"] = Entry("spawns", "plugin", "tests", cls=cls)
-        return found
-    monkeypatch.setattr(Registry, "discover", classmethod(discover))
+    register_methods(cls)
     frame = rippleb.run(methods="spawns", scenarios="static-contact", seeds=1)
     assert list(frame.status) == ["ok"], frame.message.tolist()
     time.sleep(0.3)

@@ -185,13 +185,12 @@ def test_environmental_failures_are_retried_and_said(fake, tmp_path):
     assert status == {"raw": "ok", "perfect": "error"}   # a method's own failure is its result
 
 
-def test_a_row_killed_from_outside_is_environmental(fake, tmp_path, monkeypatch):
+def test_a_row_killed_from_outside_is_environmental(fake, tmp_path, monkeypatch, register_methods):
     import os
     import signal
     import threading
 
     from rippleb.method import Method
-    from rippleb.registry import Entry, Registry
 
     pid_file = tmp_path / "pid"
 
@@ -207,13 +206,7 @@ def test_a_row_killed_from_outside_is_environmental(fake, tmp_path, monkeypatch)
             time.sleep(0.02)
         os.kill(int(pid_file.read_text()), signal.SIGKILL)
 
-    real = Registry.discover
-
-    def discover(cls, group="rippleb.methods"):
-        found = real(group)
-        found.entries["victim"] = Entry("victim", "plugin", "tests", cls=Victim)
-        return found
-    monkeypatch.setattr(Registry, "discover", classmethod(discover))
+    register_methods(Victim)
     killer = threading.Thread(target=oom_killer, daemon=True)
     killer.start()
     frame = rippleb.run(methods="victim", scenarios="creep", seeds=1, timeout=120)

@@ -10,7 +10,6 @@ import pytest
 import rippleb
 from rippleb import InputError, JointSpec, Method, make_log
 from rippleb import runner as runner_mod
-from rippleb.registry import Entry, Registry
 from rippleb.results import COLUMNS
 
 N = 4000  # 0.2 s at 20 kHz: 200 ticks
@@ -120,19 +119,12 @@ ALL = [Perfect, Raises, NaNs, Short, Strings, Sleeps, Hog, Chatty, Peeks]
 
 
 @pytest.fixture
-def fake(monkeypatch):
+def fake(monkeypatch, register_methods):
     """Fake simulation and a registry of the test methods plus the built-ins."""
     import rippleb.simulator
 
     monkeypatch.setattr(rippleb.simulator, "simulate", fake_simulate)
-    real = Registry.discover
-
-    def discover(group="rippleb.methods"):
-        found = real(group)
-        for cls in ALL:
-            found.entries[cls.name] = Entry(cls.name, "plugin", "tests", cls=cls)
-        return found
-    monkeypatch.setattr(Registry, "discover", classmethod(lambda cls, group="rippleb.methods": discover(group)))
+    register_methods(*ALL)
 
 
 @pytest.mark.slow

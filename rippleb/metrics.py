@@ -10,6 +10,7 @@ scenario). ``docs/metrics.md`` repeats these formulas.
 from __future__ import annotations
 
 import dataclasses
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -28,6 +29,8 @@ BAND_FRACTION = 0.5               # bandwidth_hz: H1 averaged over half-octave b
 BAND_STEP = 1.0 / 12.0            # ... centred every 1/12 octave
 BAND_MIN_BINS = 4.0               # lowest centre: at least 4 FFT bins of the shortest chirp window
 HALF_POWER = 1.0 / np.sqrt(2.0)   # -3 dB
+
+_MEMO: dict[int, dict] = {}       # id of a live Truth -> what Truth.remembered computed for it
 
 
 @dataclass(frozen=True)
@@ -51,6 +54,21 @@ class Truth:
     torque_ref: np.ndarray | None = None
     steps: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     chirps: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+
+    def remembered(self, key, compute):
+        """``compute()``, computed once per ``key`` while this truth lives.
+
+        For what the metrics compute from the truth alone (its spectrum, running sums):
+        the rows of a case are scored against one ``Truth``, so each estimate pays only
+        for its own side. Kept beside the instance, not in it, so its fields stay its data.
+        """
+        memo = _MEMO.get(id(self))
+        if memo is None:
+            memo = _MEMO[id(self)] = {}
+            weakref.finalize(self, _MEMO.pop, id(self), None)
+        if key not in memo:
+            memo[key] = compute()
+        return memo[key]
 
     @classmethod
     def from_simulation(cls, sim) -> "Truth":
@@ -113,7 +131,7 @@ def max_error(estimate: np.ndarray, truth: np.ndarray | None, mask: np.ndarray) 
 
 
 def delay_ms(estimate: np.ndarray, truth: np.ndarray | None, mask: np.ndarray, fs: float,
-             max_delay_s: float = MAX_DELAY_S) -> float:
+             max_delay_s: float = MAX_DELAY_S, memo: Truth | None = None) -> float:
     """The lag ``L`` in [0, 100] ms maximising the cross-correlation of estimate and truth.
 
     Over the samples from the first to the last index of ``W`` (``N`` of them), for each
@@ -133,8 +151,11 @@ def delay_ms(estimate: np.ndarray, truth: np.ndarray | None, mask: np.ndarray, f
     ``L*``. Doubling the misfit means the shift has added as much error as the estimate
     already has; on a torque that varies slowly against that error (ripple, noise) it
     takes a shift of tens of milliseconds, and ``L*`` is set by the error, not by a delay.
+
+    ``memo``, the :class:`Truth` that holds ``truth`` and ``mask``, keeps what depends on
+    them alone for the next estimate (the same numbers, computed once).
     """
-    r = _lag_correlation(estimate, truth, mask, fs, max_delay_s)
+    r = _lag_correlation(estimate, truth, mask, fs, max_delay_s, memo)
     if r is None:
         return float("nan")
     best = int(np.argmax(r))
@@ -145,34 +166,50 @@ def delay_ms(estimate: np.ndarray, truth: np.ndarray | None, mask: np.ndarray, f
     return float(1000.0 * best / fs)
 
 
-def _lag_correlation(estimate, truth, mask, fs, max_delay_s) -> np.ndarray | None:
+def _lag_correlation(estimate, truth, mask, fs, max_delay_s, memo=None) -> np.ndarray | None:
     """``r[L]`` of :func:`delay_ms` for ``L = 0 .. max lag`` (``-inf`` where undefined);
     None if it is undefined for every lag."""
     if truth is None or not mask.any():
         return None
-    idx = np.flatnonzero(mask)
-    x = np.asarray(truth[idx[0]: idx[-1] + 1], float)
-    z = np.asarray(estimate[idx[0]: idx[-1] + 1], float)
-    x = x - x.mean()
+    key = ("lag", id(truth), id(mask), fs, max_delay_s)
+    side = (memo.remembered(key, lambda: _truth_side(truth, mask, fs, max_delay_s)) if memo is not None
+            else _truth_side(truth, mask, fs, max_delay_s))
+    if side is None:
+        return None
+    first, n, max_lag, size, x_spectrum_conj, sx, sxx = side
+    z = np.asarray(estimate[first: first + n], float)
     z = z - z.mean()
-    n = len(x)
-    max_lag = min(int(round(max_delay_s * fs)), n - 2)
-    if max_lag < 0 or not np.any(x) or not np.any(z):
+    if not np.any(z):
         return None
     lags = np.arange(max_lag + 1)
     count = n - lags
-    size = 1 << int(np.ceil(np.log2(2 * n)))
-    cross = np.fft.irfft(np.fft.rfft(z, size) * np.conj(np.fft.rfft(x, size)), size)[: max_lag + 1]
+    cross = np.fft.irfft(np.fft.rfft(z, size) * x_spectrum_conj, size)[: max_lag + 1]
     # Sums over the overlaps from cumulative sums: x over [0, n-L), z over [L, n).
-    cx, cxx = _cumsum0(x), _cumsum0(x * x)
     cz, czz = _cumsum0(z), _cumsum0(z * z)
-    sx, sxx = cx[n - lags], cxx[n - lags]
     sz, szz = cz[n] - cz[lags], czz[n] - czz[lags]
     cov = cross - sx * sz / count
     var = np.maximum(sxx - sx * sx / count, 0.0) * np.maximum(szz - sz * sz / count, 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         r = np.where(var > 0, cov / np.sqrt(var), -np.inf)
     return None if not np.isfinite(r).any() else r
+
+
+def _truth_side(truth, mask, fs, max_delay_s):
+    """What :func:`_lag_correlation` needs of the truth alone: the window's first index and
+    length, the largest lag, the FFT size, the conjugate spectrum of the mean-removed truth
+    and its overlap sums per lag; None if the correlation is undefined whatever the estimate."""
+    idx = np.flatnonzero(mask)
+    first = int(idx[0])
+    x = np.asarray(truth[first: idx[-1] + 1], float)
+    x = x - x.mean()
+    n = len(x)
+    max_lag = min(int(round(max_delay_s * fs)), n - 2)
+    if max_lag < 0 or not np.any(x):
+        return None
+    lags = np.arange(max_lag + 1)
+    size = 1 << int(np.ceil(np.log2(2 * n)))
+    cx, cxx = _cumsum0(x), _cumsum0(x * x)
+    return first, n, max_lag, size, np.conj(np.fft.rfft(x, size)), cx[n - lags], cxx[n - lags]
 
 
 def step_latency_ms(estimate: np.ndarray, truth_info: Truth) -> float:
@@ -226,44 +263,65 @@ def bandwidth_hz(estimate: np.ndarray, truth: np.ndarray | None, truth_info: Tru
     low (the bandwidth is at least that), ``f_lo`` if it is low from the start (at most
     that). NaN without a chirp in ``W`` or without a truth.
     """
-    fs, mask = truth_info.fs, truth_info.eval_mask
-    chirps = np.asarray(truth_info.chirps, float).reshape(-1, 4)
-    spans = [(int(round(a * fs)), min(int(round(b * fs)) + 1, len(mask))) for a, b in chirps[:, :2]]
-    keep = [k for k, (i0, i1) in enumerate(spans) if i1 - i0 > 8 and mask[i0:i1].all()]
-    if truth is None or not keep:
+    if truth is None:
         return float("nan")
-    shortest = min(spans[k][1] - spans[k][0] for k in keep) / fs
-    f_lo = max(2.0 ** (BAND_FRACTION / 2) * chirps[keep, 2].max(), BAND_MIN_BINS / shortest)
-    f_hi = chirps[keep, 3].min()
-    if f_lo >= f_hi:
+    side = truth_info.remembered(("band", id(truth)), lambda: _chirp_side(truth, truth_info))
+    if side is None:
         return float("nan")
-    centres = f_hi * 2.0 ** (-BAND_STEP * np.arange(int(np.log2(f_hi / f_lo) / BAND_STEP) + 1)[::-1])
-    edges = np.stack([centres * 2.0 ** (-BAND_FRACTION / 2), centres * 2.0 ** (BAND_FRACTION / 2)])
+    centres, windows = side
     cross = np.zeros(len(centres), complex)
     power = np.zeros(len(centres))
-    for k in keep:
-        i0, i1 = spans[k]
-        c, p = _band_spectra(np.asarray(estimate[i0:i1], float), np.asarray(truth[i0:i1], float),
-                             fs, edges)
-        cross += c
+    for (i0, i1), taper, X, lo, hi, p in windows:
+        cross += _band_cross(np.asarray(estimate[i0:i1], float), taper, X, lo, hi)
         power += p
     with np.errstate(divide="ignore", invalid="ignore"):
         gain = np.abs(cross) / power
     return _first_crossing(centres, gain, HALF_POWER)
 
 
-def _band_spectra(y: np.ndarray, x: np.ndarray, fs: float, edges: np.ndarray):
-    """Band sums of ``Y conj(X)`` and ``|X|^2`` (detrended, Hann-windowed) over ``edges``."""
+def _chirp_side(truth: np.ndarray, truth_info: Truth):
+    """What :func:`bandwidth_hz` needs of the truth alone: the band centres and, per chirp
+    window, its span, taper, truth spectrum, band limits (FFT bins) and band sums of
+    ``|X|^2``; None if no chirp window lies in ``W``."""
+    fs, mask = truth_info.fs, truth_info.eval_mask
+    chirps = np.asarray(truth_info.chirps, float).reshape(-1, 4)
+    spans = [(int(round(a * fs)), min(int(round(b * fs)) + 1, len(mask))) for a, b in chirps[:, :2]]
+    keep = [k for k, (i0, i1) in enumerate(spans) if i1 - i0 > 8 and mask[i0:i1].all()]
+    if not keep:
+        return None
+    shortest = min(spans[k][1] - spans[k][0] for k in keep) / fs
+    f_lo = max(2.0 ** (BAND_FRACTION / 2) * chirps[keep, 2].max(), BAND_MIN_BINS / shortest)
+    f_hi = chirps[keep, 3].min()
+    if f_lo >= f_hi:
+        return None
+    centres = f_hi * 2.0 ** (-BAND_STEP * np.arange(int(np.log2(f_hi / f_lo) / BAND_STEP) + 1)[::-1])
+    edges = np.stack([centres * 2.0 ** (-BAND_FRACTION / 2), centres * 2.0 ** (BAND_FRACTION / 2)])
+    windows = []
+    for k in keep:
+        i0, i1 = spans[k]
+        x = np.asarray(truth[i0:i1], float)
+        taper, X, lo, hi = _truth_spectrum(x, fs, edges)
+        power = _cumsum0(np.abs(X) ** 2)
+        windows.append(((i0, i1), taper, X, lo, hi, power[hi] - power[lo]))
+    return centres, windows
+
+
+def _truth_spectrum(x: np.ndarray, fs: float, edges: np.ndarray):
+    """The Hann taper, spectrum ``X`` of the detrended, tapered ``x`` and the FFT bins of ``edges``."""
     from scipy.signal import detrend
 
     taper = np.hanning(len(x))
     X = np.fft.rfft(detrend(x) * taper)
-    Y = np.fft.rfft(detrend(y) * taper)
     freqs = np.fft.rfftfreq(len(x), 1.0 / fs)
-    lo, hi = np.searchsorted(freqs, edges[0], "left"), np.searchsorted(freqs, edges[1], "right")
-    cross = _cumsum0(Y * np.conj(X))
-    power = _cumsum0(np.abs(X) ** 2)
-    return cross[hi] - cross[lo], power[hi] - power[lo]
+    return taper, X, np.searchsorted(freqs, edges[0], "left"), np.searchsorted(freqs, edges[1], "right")
+
+
+def _band_cross(y: np.ndarray, taper: np.ndarray, X: np.ndarray, lo: np.ndarray, hi: np.ndarray):
+    """Band sums of ``Y conj(X)`` (``y`` detrended and tapered like the truth)."""
+    from scipy.signal import detrend
+
+    cross = _cumsum0(np.fft.rfft(detrend(y) * taper) * np.conj(X))
+    return cross[hi] - cross[lo]
 
 
 def _first_crossing(centres: np.ndarray, gain: np.ndarray, level: float) -> float:
@@ -300,7 +358,8 @@ def restart_max_error(estimate: np.ndarray, truth: np.ndarray | None, truth_info
     starts = starts[mask[starts]]
     if len(starts) == 0:
         return float("nan")
-    travel = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(truth_info.wave_angle)))])
+    travel = truth_info.remembered("travel", lambda: np.concatenate(
+        [[0.0], np.cumsum(np.abs(np.diff(truth_info.wave_angle)))]))
     worst = 0.0
     for i in starts:
         stop = np.searchsorted(travel, travel[i] + RESTART_ANGLE_RAD, side="left")
@@ -337,7 +396,7 @@ def score(estimate: np.ndarray, truth: Truth) -> dict[str, float]:
         "max_error_nm": max_error(estimate, truth.torque_true, mask),
         "rms_error_ref_nm": rms_error(estimate, truth.torque_ref, mask),
         "max_error_ref_nm": max_error(estimate, truth.torque_ref, mask),
-        "delay_ms": delay_ms(estimate, best, mask, truth.fs),
+        "delay_ms": delay_ms(estimate, best, mask, truth.fs, memo=truth),
         "bandwidth_hz": bandwidth_hz(estimate, best, truth),
         "step_latency_ms": step_latency_ms(estimate, truth),
         "restart_max_error_nm": restart_max_error(estimate, best, truth),

@@ -93,6 +93,7 @@ class Pool:
         self.size = size
         self.memory_mb = memory_mb
         self._running: list[_Running] = []
+        self._exiting: list[tuple[int, float]] = []   # (keeper, when to stop waiting for it)
 
     @property
     def free(self) -> int:
@@ -108,6 +109,7 @@ class Pool:
                max_bytes: int | None = None) -> None:
         """Start ``fn()`` in an isolated worker; its stdout and stderr go to the file
         ``output`` (or /dev/null), so a chatty plugin cannot garble the CLI's output."""
+        self._reap_exiting()
         result_r, result_w = os.pipe()
         ctrl_r, ctrl_w = os.pipe()
         sys.stdout.flush()
@@ -127,6 +129,7 @@ class Pool:
         """Block until at least one job ends (or passes its deadline); return those that did."""
         while True:
             finished = self._collect()
+            self._reap_exiting()
             if finished or not self._running:
                 return finished
             deadlines = [r.deadline for r in self._running if r.deadline is not None]
@@ -143,6 +146,26 @@ class Pool:
         for run in self._running:
             _end(run)
         self._running.clear()
+        for keeper, _ in self._exiting:
+            _wait_keeper(keeper)
+        self._exiting.clear()
+
+    def _reap_exiting(self) -> None:
+        """Collect keepers that have exited since their job ended; end any that overstay."""
+        now = time.monotonic()
+        still = []
+        for keeper, deadline in self._exiting:
+            try:
+                pid, _ = os.waitpid(keeper, os.WNOHANG)
+            except ChildProcessError:  # reaped already
+                continue
+            if pid:
+                continue
+            if now > deadline:
+                _wait_keeper(keeper, 0.0)
+            else:
+                still.append((keeper, deadline))
+        self._exiting = still
 
     def _collect(self) -> list[Finished]:
         done, now = [], time.monotonic()
@@ -152,7 +175,7 @@ class Pool:
             if len(run.result) > run.max_bytes:
                 result = Finished(run.key, "oversized", len(run.result), now - run.started)
             elif run.exit_code is not None or run.ctrl_eof:
-                _end(run)  # the worker is gone: drain its pipe to the end
+                _end(run, self._exiting)  # the worker is gone: drain its pipe to the end
                 result = _outcome(run, now)
             elif run.deadline is not None and now >= run.deadline:
                 result = Finished(run.key, "timeout", None, now - run.started)
@@ -192,31 +215,32 @@ def _read(run: _Running) -> None:
             buf += chunk
 
 
-def _end(run: _Running) -> None:
-    """Kill the worker (and so its namespace), let the keeper clean up, reap the keeper."""
+def _end(run: _Running, exiting: list | None = None) -> None:
+    """Kill the worker (and so its namespace), let the keeper clean up, reap the keeper.
+
+    A keeper that has reported its worker's exit has cleaned up already and has only to
+    exit: with ``exiting`` given it is left to exit on its own and reaped later (added
+    to ``exiting``), so the runner starts the next job instead of waiting for an exit.
+    """
     if run.keeper is None:
         return
+    cleaned = exiting is not None and run.exit_code is not None
     if run.exit_code is None and run.worker is not None:
         with contextlib.suppress(ProcessLookupError, PermissionError):
             os.kill(run.worker, signal.SIGKILL)
-    deadline = time.monotonic() + KEEPER_GRACE_S
-    while True:
-        pid, _ = os.waitpid(run.keeper, os.WNOHANG)
-        if pid or time.monotonic() > deadline:
-            break
-        time.sleep(0.005)
-    if not pid:  # the keeper did not finish its cleanup in time: end its whole session
-        with contextlib.suppress(ProcessLookupError, PermissionError):
-            os.killpg(run.keeper, signal.SIGKILL)
-        os.waitpid(run.keeper, 0)
-    # Every writer should be gone now: take what is left in the pipes (bounded in time,
-    # in case an escaped process still holds one), then close them.
+    if cleaned:
+        exiting.append((run.keeper, time.monotonic() + KEEPER_GRACE_S))
+    else:
+        _wait_keeper(run.keeper)
+    # Every writer should be gone now (the keeper ended the worker's processes before it
+    # reported): take what is left in the pipes (bounded in time, in case an escaped
+    # process still holds one), then close them.
     give_up = time.monotonic() + 1.0
-    while not (run.result_eof and run.ctrl_eof) and time.monotonic() < give_up:
+    while not (run.result_eof and (run.ctrl_eof or cleaned)) and time.monotonic() < give_up:
         _read(run)
         if len(run.result) > run.max_bytes:
             break
-        open_fds = [fd for fd, eof in ((run.result_fd, run.result_eof), (run.ctrl_fd, run.ctrl_eof))
+        open_fds = [fd for fd, eof in ((run.result_fd, run.result_eof), (run.ctrl_fd, run.ctrl_eof or cleaned))
                     if not eof]
         if open_fds:
             with contextlib.suppress(InterruptedError):
@@ -224,6 +248,20 @@ def _end(run: _Running) -> None:
     os.close(run.result_fd)
     os.close(run.ctrl_fd)
     run.keeper = None
+
+
+def _wait_keeper(keeper: int, grace_s: float = KEEPER_GRACE_S) -> None:
+    """Reap ``keeper``; if it has not exited within ``grace_s``, end its whole session."""
+    deadline = time.monotonic() + grace_s
+    while True:
+        pid, _ = os.waitpid(keeper, os.WNOHANG)
+        if pid or time.monotonic() > deadline:
+            break
+        time.sleep(0.005)
+    if not pid:  # the keeper did not finish its cleanup in time: end its whole session
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(keeper, signal.SIGKILL)
+        os.waitpid(keeper, 0)
 
 
 def _keeper(fn, result_w: int, ctrl_w: int, memory_mb, output) -> None:

@@ -17,6 +17,7 @@ writes more than ``max_bytes`` is killed.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import errno
 import gc
@@ -93,7 +94,6 @@ class Pool:
         self.size = size
         self.memory_mb = memory_mb
         self._running: list[_Running] = []
-        self._exiting: list[tuple[int, float]] = []   # (keeper, when to stop waiting for it)
 
     @property
     def free(self) -> int:
@@ -109,7 +109,7 @@ class Pool:
                max_bytes: int | None = None) -> None:
         """Start ``fn()`` in an isolated worker; its stdout and stderr go to the file
         ``output`` (or /dev/null), so a chatty plugin cannot garble the CLI's output."""
-        self._reap_exiting()
+        reap_exiting()
         result_r, result_w = os.pipe()
         ctrl_r, ctrl_w = os.pipe()
         sys.stdout.flush()
@@ -129,7 +129,7 @@ class Pool:
         """Block until at least one job ends (or passes its deadline); return those that did."""
         while True:
             finished = self._collect()
-            self._reap_exiting()
+            reap_exiting()
             if finished or not self._running:
                 return finished
             deadlines = [r.deadline for r in self._running if r.deadline is not None]
@@ -146,26 +146,7 @@ class Pool:
         for run in self._running:
             _end(run)
         self._running.clear()
-        for keeper, _ in self._exiting:
-            _wait_keeper(keeper)
-        self._exiting.clear()
-
-    def _reap_exiting(self) -> None:
-        """Collect keepers that have exited since their job ended; end any that overstay."""
-        now = time.monotonic()
-        still = []
-        for keeper, deadline in self._exiting:
-            try:
-                pid, _ = os.waitpid(keeper, os.WNOHANG)
-            except ChildProcessError:  # reaped already
-                continue
-            if pid:
-                continue
-            if now > deadline:
-                _wait_keeper(keeper, 0.0)
-            else:
-                still.append((keeper, deadline))
-        self._exiting = still
+        reap_exiting()
 
     def _collect(self) -> list[Finished]:
         done, now = [], time.monotonic()
@@ -175,7 +156,7 @@ class Pool:
             if len(run.result) > run.max_bytes:
                 result = Finished(run.key, "oversized", len(run.result), now - run.started)
             elif run.exit_code is not None or run.ctrl_eof:
-                _end(run, self._exiting)  # the worker is gone: drain its pipe to the end
+                _end(run, _EXITING)  # the worker is gone: drain its pipe to the end
                 result = _outcome(run, now)
             elif run.deadline is not None and now >= run.deadline:
                 result = Finished(run.key, "timeout", None, now - run.started)
@@ -248,6 +229,34 @@ def _end(run: _Running, exiting: list | None = None) -> None:
     os.close(run.result_fd)
     os.close(run.ctrl_fd)
     run.keeper = None
+
+
+#: Keepers whose job has ended and that have only to exit: ``(pid, when to stop waiting)``.
+#: Shared by every pool of the process (a Dask worker runs one pool per row), reaped by
+#: the next pool call and at exit.
+_EXITING: list[tuple[int, float]] = []
+
+
+def reap_exiting(block: bool = False) -> None:
+    """Reap the keepers of :data:`_EXITING` that have exited (all of them if ``block``);
+    end any that overstays its grace."""
+    now = time.monotonic()
+    still = []
+    for keeper, deadline in _EXITING:
+        try:
+            pid, _ = os.waitpid(keeper, os.WNOHANG)
+        except ChildProcessError:  # reaped already
+            continue
+        if pid:
+            continue
+        if block or now > deadline:
+            _wait_keeper(keeper, max(0.0, deadline - now))
+        else:
+            still.append((keeper, deadline))
+    _EXITING[:] = still
+
+
+atexit.register(reap_exiting, True)
 
 
 def _wait_keeper(keeper: int, grace_s: float = KEEPER_GRACE_S) -> None:

@@ -263,65 +263,44 @@ def bandwidth_hz(estimate: np.ndarray, truth: np.ndarray | None, truth_info: Tru
     low (the bandwidth is at least that), ``f_lo`` if it is low from the start (at most
     that). NaN without a chirp in ``W`` or without a truth.
     """
-    if truth is None:
+    fs, mask = truth_info.fs, truth_info.eval_mask
+    chirps = np.asarray(truth_info.chirps, float).reshape(-1, 4)
+    spans = [(int(round(a * fs)), min(int(round(b * fs)) + 1, len(mask))) for a, b in chirps[:, :2]]
+    keep = [k for k, (i0, i1) in enumerate(spans) if i1 - i0 > 8 and mask[i0:i1].all()]
+    if truth is None or not keep:
         return float("nan")
-    side = truth_info.remembered(("band", id(truth)), lambda: _chirp_side(truth, truth_info))
-    if side is None:
+    shortest = min(spans[k][1] - spans[k][0] for k in keep) / fs
+    f_lo = max(2.0 ** (BAND_FRACTION / 2) * chirps[keep, 2].max(), BAND_MIN_BINS / shortest)
+    f_hi = chirps[keep, 3].min()
+    if f_lo >= f_hi:
         return float("nan")
-    centres, windows = side
+    centres = f_hi * 2.0 ** (-BAND_STEP * np.arange(int(np.log2(f_hi / f_lo) / BAND_STEP) + 1)[::-1])
+    edges = np.stack([centres * 2.0 ** (-BAND_FRACTION / 2), centres * 2.0 ** (BAND_FRACTION / 2)])
     cross = np.zeros(len(centres), complex)
     power = np.zeros(len(centres))
-    for (i0, i1), taper, X, lo, hi, p in windows:
-        cross += _band_cross(np.asarray(estimate[i0:i1], float), taper, X, lo, hi)
+    for k in keep:
+        i0, i1 = spans[k]
+        c, p = _band_spectra(np.asarray(estimate[i0:i1], float), np.asarray(truth[i0:i1], float),
+                             fs, edges)
+        cross += c
         power += p
     with np.errstate(divide="ignore", invalid="ignore"):
         gain = np.abs(cross) / power
     return _first_crossing(centres, gain, HALF_POWER)
 
 
-def _chirp_side(truth: np.ndarray, truth_info: Truth):
-    """What :func:`bandwidth_hz` needs of the truth alone: the band centres and, per chirp
-    window, its span, taper, truth spectrum, band limits (FFT bins) and band sums of
-    ``|X|^2``; None if no chirp window lies in ``W``."""
-    fs, mask = truth_info.fs, truth_info.eval_mask
-    chirps = np.asarray(truth_info.chirps, float).reshape(-1, 4)
-    spans = [(int(round(a * fs)), min(int(round(b * fs)) + 1, len(mask))) for a, b in chirps[:, :2]]
-    keep = [k for k, (i0, i1) in enumerate(spans) if i1 - i0 > 8 and mask[i0:i1].all()]
-    if not keep:
-        return None
-    shortest = min(spans[k][1] - spans[k][0] for k in keep) / fs
-    f_lo = max(2.0 ** (BAND_FRACTION / 2) * chirps[keep, 2].max(), BAND_MIN_BINS / shortest)
-    f_hi = chirps[keep, 3].min()
-    if f_lo >= f_hi:
-        return None
-    centres = f_hi * 2.0 ** (-BAND_STEP * np.arange(int(np.log2(f_hi / f_lo) / BAND_STEP) + 1)[::-1])
-    edges = np.stack([centres * 2.0 ** (-BAND_FRACTION / 2), centres * 2.0 ** (BAND_FRACTION / 2)])
-    windows = []
-    for k in keep:
-        i0, i1 = spans[k]
-        x = np.asarray(truth[i0:i1], float)
-        taper, X, lo, hi = _truth_spectrum(x, fs, edges)
-        power = _cumsum0(np.abs(X) ** 2)
-        windows.append(((i0, i1), taper, X, lo, hi, power[hi] - power[lo]))
-    return centres, windows
-
-
-def _truth_spectrum(x: np.ndarray, fs: float, edges: np.ndarray):
-    """The Hann taper, spectrum ``X`` of the detrended, tapered ``x`` and the FFT bins of ``edges``."""
+def _band_spectra(y: np.ndarray, x: np.ndarray, fs: float, edges: np.ndarray):
+    """Band sums of ``Y conj(X)`` and ``|X|^2`` (detrended, Hann-windowed) over ``edges``."""
     from scipy.signal import detrend
 
     taper = np.hanning(len(x))
     X = np.fft.rfft(detrend(x) * taper)
+    Y = np.fft.rfft(detrend(y) * taper)
     freqs = np.fft.rfftfreq(len(x), 1.0 / fs)
-    return taper, X, np.searchsorted(freqs, edges[0], "left"), np.searchsorted(freqs, edges[1], "right")
-
-
-def _band_cross(y: np.ndarray, taper: np.ndarray, X: np.ndarray, lo: np.ndarray, hi: np.ndarray):
-    """Band sums of ``Y conj(X)`` (``y`` detrended and tapered like the truth)."""
-    from scipy.signal import detrend
-
-    cross = _cumsum0(np.fft.rfft(detrend(y) * taper) * np.conj(X))
-    return cross[hi] - cross[lo]
+    lo, hi = np.searchsorted(freqs, edges[0], "left"), np.searchsorted(freqs, edges[1], "right")
+    cross = _cumsum0(Y * np.conj(X))
+    power = _cumsum0(np.abs(X) ** 2)
+    return cross[hi] - cross[lo], power[hi] - power[lo]
 
 
 def _first_crossing(centres: np.ndarray, gain: np.ndarray, level: float) -> float:

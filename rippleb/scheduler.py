@@ -105,12 +105,19 @@ def _lengths(log: SensorLog) -> tuple[int, int]:
 
 
 def schedule(pool: Pool, state: State, bar) -> None:
+    finished_rows = []   # rows ended but not yet scored
     try:
-        while state.pending or pool.busy:
+        while state.pending or pool.busy or finished_rows:
             while pool.free and state.pending:
                 check_interrupted()
                 if not _start_next(pool, state, bar):
                     break
+            # Score the rows that ended after their slots have new jobs: the slots do not
+            # sit idle while this process scores.
+            while finished_rows:
+                _finish_row(finished_rows.pop(0), state, bar)
+            if not (state.pending or pool.busy):
+                break
             check_interrupted()
             for fin in pool.wait():
                 if isinstance(fin.key, tuple):
@@ -118,9 +125,11 @@ def schedule(pool: Pool, state: State, bar) -> None:
                 elif isinstance(fin.key, Fit):
                     state.fits[fin.key] = _fit_outcome(fin, state)
                 else:
-                    _finish_row(fin, state, bar)
+                    finished_rows.append(fin)
     finally:
         pool.kill_all()
+        while finished_rows:  # interrupted: what finished is still recorded
+            _finish_row(finished_rows.pop(0), state, bar)
 
 
 def _start_next(pool: Pool, state: State, bar) -> bool:

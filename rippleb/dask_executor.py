@@ -68,6 +68,8 @@ class DaskExecutor:
         if not tasks:
             return
         with self._client() as client:
+            client.wait_for_workers(1)
+            warm_workers(client)
             _stream(client, tasks, record)
 
     @contextlib.contextmanager
@@ -117,7 +119,6 @@ def _stream(client, tasks: list, record) -> None:
     from rippleb.scheduler import check_interrupted
 
     client.wait_for_workers(1)
-    warm_workers(client)
     dispatch = _Dispatch(client, tasks)
     stream = as_completed()
     blas = openblas_threads()

@@ -15,7 +15,7 @@ import pytest
 from scipy import signal
 
 from rippleb import builtin_scenarios, load_scenario, simulate
-from rippleb import robot
+from rippleb.simulator import robot
 from rippleb.scenario import scenario_from_dict
 
 

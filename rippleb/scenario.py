@@ -25,7 +25,6 @@ from pathlib import Path
 import numpy as np
 
 from rippleb.data import JointSpec
-from rippleb.drive_ripple import RippleSettings
 from rippleb.errors import InputError
 from rippleb.profiles import DEFAULT_RISE, Load, Segment, evaluate_segments  # noqa: F401 (re-exported)
 
@@ -75,6 +74,37 @@ MAX_LOAD_FACTOR = 10.0
 DEFAULT_ROBOT = "ur5"
 DEFAULT_JOINT = "shoulder_lift_joint"
 DEFAULT_TEMPERATURE_C = 40.0
+#: The temperature catalogue values refer to; friction and ripple scale from it.
+REFERENCE_TEMPERATURE_C = 25.0
+#: Width of the strain hysteresis loop [Nm] (1 % of the 51 Nm rating). **Estimate**, see
+#: docs/physics.md, "Output-locked ripple, temperature, hysteresis".
+HYSTERESIS_NM = 0.5
+#: Relative change of every ripple amplitude per kelvin from 25 degC. Off: no source.
+RIPPLE_TEMP_COEFF = 0.0
+
+
+@dataclass(frozen=True)
+class RippleSettings:
+    """What a scenario's ``[ripple]`` table sets (all optional); the defaults are the
+    simulator's physics (:mod:`rippleb.simulator.ripple`).
+
+    Attributes
+    ----------
+    output_scale
+        Multiplies the output-locked ripple amplitudes (0 turns it off).
+    hysteresis_nm
+        Width [Nm] of the strain hysteresis loop (0 turns it off).
+    temperature_coeff
+        Relative change of all ripple amplitudes per kelvin above 25 degC [1/K].
+    """
+
+    output_scale: float = 1.0
+    hysteresis_nm: float = HYSTERESIS_NM
+    temperature_coeff: float = RIPPLE_TEMP_COEFF
+
+    def temperature_scale(self, temperature_c: float) -> float:
+        """Factor on every ripple amplitude at ``temperature_c``."""
+        return 1.0 + self.temperature_coeff * (temperature_c - REFERENCE_TEMPERATURE_C)
 
 
 @dataclass(frozen=True)
@@ -143,7 +173,7 @@ class Scenario:
         Faulty sensors (:class:`Faults`); none by default.
     ripple
         Output-locked ripple, hysteresis and the ripple's temperature coefficient
-        (:class:`~rippleb.drive_ripple.RippleSettings`); the documented defaults.
+        (:class:`RippleSettings`); the documented defaults.
     """
 
     name: str
@@ -176,7 +206,7 @@ class Scenario:
         InputError
             ``<file>: trajectory: <joint> travels over [lo, hi] rad, outside its limits``.
         """
-        from rippleb import robot as arm
+        from rippleb.simulator import robot as arm
 
         model = arm.load_model(self.robot)
         idx = model.joints[model.getJointId(self.joint)].idx_q
@@ -360,7 +390,7 @@ class _Parser:
         return spec
 
     def robot(self, raw):
-        from rippleb import robot as arm
+        from rippleb.simulator import robot as arm
 
         values = self.table(raw, _ROBOT_KEYS, "robot")
         name = values.get("name", DEFAULT_ROBOT)

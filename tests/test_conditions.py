@@ -10,9 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rippleb import InputError, simulate
-from rippleb.conditions import (AGED_AMPLITUDE_SIGMA, AGED_PHASE_SIGMA, AGED_ZERO_SIGMA, CONDITIONS,
+from rippleb.simulator.conditions import (AGED_AMPLITUDE_SIGMA, AGED_PHASE_SIGMA, AGED_ZERO_SIGMA, CONDITIONS,
                                 POWER_CYCLE_COOLING_K, aged, index_count, index_pulses, re_assembled)
-from rippleb.drive_ripple import RippleSettings
+from rippleb.scenario import RippleSettings
 from rippleb.metrics import Truth, score
 from rippleb.scenario import load_scenario, scenario_from_dict
 from rippleb.simulator import Device

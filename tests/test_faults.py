@@ -16,7 +16,8 @@ import pytest
 import rippleb
 from rippleb import InputError, make_log
 from rippleb.scenario import Faults, scenario_from_dict
-from rippleb.simulator import STRAIN_RANGE, simulate
+from rippleb.simulator import simulate
+from rippleb.simulator.sensors import STRAIN_RANGE
 
 ROOT = Path(__file__).resolve().parents[1]
 _spec = importlib.util.spec_from_file_location("fault_table", ROOT / "benchmarks" / "fault_table.py")

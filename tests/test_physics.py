@@ -143,7 +143,7 @@ def test_current_carries_the_load_through_the_gear():
 def test_load_table_matches_rnea():
     import pinocchio as pin
 
-    from rippleb import robot
+    from rippleb.simulator import robot
 
     table = robot.load_table("ur5", "shoulder_lift_joint", {"elbow_joint": 1.5}, (-2.2, -0.9))
     model = robot.load_model("ur5")

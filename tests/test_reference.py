@@ -4,8 +4,9 @@ model whose link masses and inertias are off by the documented spread."""
 import numpy as np
 import pytest
 
-from rippleb import robot, simulate
-from rippleb.simulator import _load_table
+from rippleb import simulate
+from rippleb.simulator import robot
+from rippleb.simulator.joint import load_table as _load_table
 
 SEEDS = range(900, 910)
 

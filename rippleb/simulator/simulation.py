@@ -26,10 +26,10 @@ import numpy as np
 
 from rippleb.data import JointSpec, SensorLog
 from rippleb.scenario import Scenario, load_scenario
-from rippleb.simulator import conditions
+from rippleb.simulator import conditions, controller
 from rippleb.simulator.conditions import DEFAULT_CONDITION, check_condition, stable_hash
 from rippleb.simulator.device import Device, check_seed
-from rippleb.simulator.joint import load_table, twist
+from rippleb.simulator.joint import load_table
 from rippleb.simulator.sensors import current_sense, dropouts, encoder_faults, strain_bridge
 
 
@@ -84,24 +84,18 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
 
     n = max(2, int(round(sc.duration * spec.fs)))
     t = np.arange(n) / spec.fs
-    q, qd, qdd = sc.trajectory(t)
-    table = load_table(sc, q)
-    tau_true = (table.torque(q, qd, qdd) + device.output_bearing_friction(qd, sc.temperature_c)
-                + sc.external_torque(t))
+    trajectory = sc.trajectory(t)
+    q_d, qd_d = trajectory[0], trajectory[1]
     # eq. (7) as a controller computes it: desired trajectory, nominal (identified) model
-    nominal = load_table(sc, q, nominal_seed=seed)
-    tau_ref = nominal.model_torque(q, qdd) + sc.external_torque(t, known_only=True)
-
-    N = spec.gear_ratio
-    deflection = twist(tau_true)
-    theta_m = N * (q + deflection) + device.encoder_zero
-    # The twist changes with the load, so the motor turns a little even when q stands still.
-    twist_rate = np.gradient(deflection, t)
-    w_m = N * (qd + twist_rate)
-    a_m = N * (qdd + np.gradient(twist_rate, t))
+    nominal = load_table(sc, q_d, nominal_seed=seed)
+    tau_ref = nominal.model_torque(q_d, trajectory[2]) + sc.external_torque(t, known_only=True)
+    gains = controller.design_gains(spec, float(np.mean(nominal.inertia)))
+    state = controller.run(spec, device, sc.temperature_c, load_table(sc, q_d), gains, t, trajectory,
+                           tau_ref, sc.external_torque(t))
+    q, qd, theta_m, _, tau_true, commanded = state
 
     strain = strain_bridge(device, sc, t, theta_m, tau_true, noise, output_angle=q)
-    current = current_sense(device, sc, spec, theta_m, w_m, a_m, tau_true, noise)
+    current = current_sense(sc, commanded, device.current_offset, noise)
     absolute = np.floor(theta_m / (2 * np.pi) * spec.counts_per_rev).astype(np.int64)
     index = conditions.index_pulses(absolute, conditions.index_count(seed, spec.counts_per_rev),
                                     spec.counts_per_rev)
@@ -122,6 +116,6 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     log = SensorLog(spec=spec, t=t, strain=strain, encoder=encoder, current=current, index=index,
                     torque_true=tau_true, torque_ref=tau_ref, meta=meta)
     start, stop = sc.evaluation
-    return Simulation(log=log, moving=np.abs(qd) > 1e-12, wave_angle=theta_m,
+    return Simulation(log=log, moving=np.abs(qd_d) > 1e-12, wave_angle=theta_m,
                       joint_velocity=qd, eval_mask=(t >= start) & (t <= stop),
                       scenario=sc, device=device)

@@ -42,7 +42,11 @@ def test_reference_is_eq7_of_the_desired_trajectory_with_the_nominal_model(monke
     monkeypatch.setattr(robot, "NOMINAL_INERTIA_SPREAD", 0.0)
     exact = simulate("paper-quintic", 900)
     assert np.allclose(exact.log.torque_ref, _load_table(sim.scenario, q).model_torque(q, qdd), atol=1e-9)
-    assert np.array_equal(exact.log.torque_true, sim.log.torque_true)
+    # the true torque feels the nominal model only through the controller's feedforward,
+    # which the position loop partly corrects: less than the reference moves
+    rms = lambda x: np.sqrt(np.mean(x**2))  # noqa: E731
+    moved = rms(exact.log.torque_ref - sim.log.torque_ref)
+    assert 0 < rms(exact.log.torque_true - sim.log.torque_true) < moved
 
 
 @pytest.mark.slow

@@ -1,10 +1,14 @@
 """One simulated run: ``simulate(scenario, seed, condition)`` puts the parts together.
 
-``simulate(scenario, seed)`` evaluates everything analytically and vectorised on the
-DAQ grid ``t = k / fs``. The device (the hidden truth of one joint: gauge errors,
-ripple, friction, offsets) comes from ``Device.from_seed(seed)``; the measurement
-noise comes from a second generator seeded by ``(seed, scenario name)``, so the
-calibration log and an evaluation log of one seed share the device but not the noise.
+``simulate(scenario, seed)`` integrates the closed-loop flexible joint on the DAQ grid
+``t = k / fs`` (:mod:`rippleb.simulator.controller`, :mod:`rippleb.simulator.joint`): the
+motor under a position controller that follows the scenario's trajectory drives the
+link through the drive's compliance, so the joint angle, the shaft torque, the motor angle
+and the current are simulated, not prescribed. The sensors then read that motion. The
+device (the hidden truth of one joint: gauge errors, ripple, friction, offsets) comes
+from ``Device.from_seed(seed)``; the measurement noise comes from a second generator
+seeded by ``(seed, scenario name)``, so the calibration log and an evaluation log of one
+seed share the device but not the noise.
 
 Every default value of the parts is listed with its source in ``docs/physics.md``.
 
@@ -12,9 +16,8 @@ Sign conventions
 ----------------
 Positive joint torque ``tau`` drives the joint in the positive ``q`` direction. The motor
 angle is counted so that ``theta_m = N (q + twist(tau))`` (the gear's sign inversion is
-folded into the encoder's counting direction). The motor torque that produces current is
-``tau / N`` plus everything the motor must overcome on its own shaft: rotor inertia,
-friction opposing the motor velocity, and cogging.
+folded into the encoder's counting direction). The motor's current accelerates its rotor
+against ``tau / N``, the friction opposing the motor velocity, and cogging.
 """
 
 from __future__ import annotations

@@ -37,7 +37,8 @@ _TOP_KEYS = {"description": (str,), "scored": (bool,), "duration": _NUMBER,
              "temperature_c": _NUMBER, "evaluation": (dict,), "joint": (dict,),
              "robot": (dict,), "trajectory": (dict,), "load": (list,), "faults": (dict,),
              "ripple": (dict,)}
-_RIPPLE_KEYS = {"output_scale": _NUMBER, "hysteresis_nm": _NUMBER, "temperature_coeff": _NUMBER}
+_RIPPLE_KEYS = {"output_scale": _NUMBER, "hysteresis_nm": _NUMBER, "temperature_coeff": _NUMBER,
+                "drift": _NUMBER}
 _EVAL_KEYS = {"start": _NUMBER, "stop": _NUMBER}
 _JOINT_KEYS = {f.name: ((int,) if f.type in ("int", int) else _NUMBER)
                for f in dataclasses.fields(JointSpec)}
@@ -96,11 +97,17 @@ class RippleSettings:
         Width [Nm] of the strain hysteresis loop (0 turns it off).
     temperature_coeff
         Relative change of all ripple amplitudes per kelvin above 25 degC [1/K].
+    drift
+        How far the joint drifted since calibration under the ``aged`` condition, in
+        multiples of the documented estimate (:mod:`rippleb.simulator.conditions`): the
+        ripple amplitude, ripple phase and bridge zero changes of each device are scaled
+        by it (0: no drift, 1: the estimate). No effect under other conditions.
     """
 
     output_scale: float = 1.0
     hysteresis_nm: float = HYSTERESIS_NM
     temperature_coeff: float = RIPPLE_TEMP_COEFF
+    drift: float = 1.0
 
     def temperature_scale(self, temperature_c: float) -> float:
         """Factor on every ripple amplitude at ``temperature_c``."""
@@ -482,7 +489,8 @@ class _Parser:
         ranges = {"output_scale": (0.0, 10.0, "in [0, 10]"),
                   "hysteresis_nm": (0.0, 0.2 * spec.rated_torque,
                                     f"in [0, 0.2 x rated_torque = {0.2 * spec.rated_torque:g}] Nm"),
-                  "temperature_coeff": (-0.01, 0.01, "in [-0.01, 0.01] per K")}
+                  "temperature_coeff": (-0.01, 0.01, "in [-0.01, 0.01] per K"),
+                  "drift": (0.0, 5.0, "in [0, 5] (multiples of the documented drift)")}
         for key, value in values.items():
             lo, hi, what = ranges[key]
             if not lo <= value <= hi:

@@ -351,3 +351,26 @@ def test_index_homing_recovers_the_calibration_frame(shift, steps, mark):
         assert np.all(np.minimum(frame, n - frame) <= 1)
     else:
         assert np.array_equal(out, logged)
+
+
+@pytest.mark.parametrize("seed", [0, 5])
+def test_aged_drift_scales_along_one_direction_per_device(seed):
+    """``[ripple] drift`` multiplies the aged changes; the drawn direction stays the device's."""
+    device = Device.from_seed(seed)
+    unit, double, none = aged(device, 1.0), aged(device, 2.0), aged(device, 0.0)
+    assert none == device
+    log_ratio = lambda d: np.log(np.asarray(d.ripple_base) / device.ripple_base)  # noqa: E731
+    np.testing.assert_allclose(log_ratio(double), 2 * log_ratio(unit), rtol=1e-9)
+    np.testing.assert_allclose(np.subtract(double.ripple_phase, device.ripple_phase),
+                               2 * np.subtract(unit.ripple_phase, device.ripple_phase), rtol=1e-9)
+    assert double.offset - device.offset == pytest.approx(2 * (unit.offset - device.offset), rel=1e-9)
+
+
+def test_scenario_drift_reaches_the_aged_log_only():
+    base = load_scenario("paper-quintic")
+    still = dataclasses.replace(base, ripple=dataclasses.replace(base.ripple, drift=0.0))
+    assert base.ripple.drift == 1.0
+    same = simulate(base, 2, "same-session").log
+    np.testing.assert_array_equal(simulate(still, 2, "aged").log.strain, same.strain)
+    assert not np.array_equal(simulate(base, 2, "aged").log.strain, same.strain)
+    np.testing.assert_array_equal(simulate(still, 2, "same-session").log.strain, same.strain)

@@ -29,6 +29,11 @@ from rippleb.simulator.robot import LoadTable
 #: Closed-loop bandwidth as a fraction of the locked-motor resonance: a collocated PD
 #: loop is kept well below the antiresonance it cannot see, a factor 3 is the usual margin.
 BANDWIDTH_FRACTION = 1.0 / 3.0
+#: Samples per radian of closed-loop bandwidth at least: a sampled loop with a zero-order
+#: hold keeps its bandwidth some 20 times below its sample rate (Franklin, Powell & Workman,
+#: *Digital Control of Dynamic Systems*, ch. 11: 20-40 samples per rise time); binds only
+#: for light links (a wrist), whose resonance a third of would be out of a 1 kHz loop's reach.
+SAMPLES_PER_BANDWIDTH = 20.0
 #: Damping ratio of the rigid-body closed loop: the fastest response with at most 4.3 % overshoot.
 DAMPING_RATIO = 1.0 / np.sqrt(2.0)
 #: Cut-off of the first-order low-pass on the encoder's difference velocity, as a multiple
@@ -70,11 +75,12 @@ class Gains:
 
 
 def design_gains(spec: JointSpec, link_inertia: float) -> Gains:
-    """Pole placement on the rigid joint of link inertia ``link_inertia`` [kg m^2]."""
+    """Pole placement on the rigid joint of link inertia ``link_inertia`` [kg m^2]: the
+    bandwidth a third of the locked-motor resonance, at most ``2 pi control_rate / 20``."""
     N = spec.gear_ratio
     inertia = spec.rotor_inertia + link_inertia / N**2
     resonance = np.sqrt(joint.STIFFNESS_LOW / link_inertia)
-    bandwidth = BANDWIDTH_FRACTION * resonance
+    bandwidth = min(BANDWIDTH_FRACTION * resonance, 2 * np.pi * spec.control_rate / SAMPLES_PER_BANDWIDTH)
     return Gains(kp=inertia * bandwidth**2, kd=2 * DAMPING_RATIO * inertia * bandwidth,
                  bandwidth=bandwidth, damping=DAMPING_RATIO, inertia=inertia, resonance=resonance)
 

@@ -61,6 +61,9 @@ def test_each_fault_touches_only_its_own_sensors(healthy, faults, touched):
     for name, values in healthy.log.columns().items():
         if name in touched:
             assert not np.array_equal(getattr(faulty.log, name), values), name
+        elif name == "index" and "dropout_rate" in faults:
+            # a pulse inside a lost frame is lost with it (never invented)
+            assert np.all(faulty.log.index <= values)
         else:
             np.testing.assert_array_equal(getattr(faulty.log, name), values, err_msg=name)
     assert faulty.log.meta["faults"] == faults

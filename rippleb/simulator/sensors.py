@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from rippleb.data import JointSpec
 from rippleb.scenario import REFERENCE_TEMPERATURE_C, Scenario
 from rippleb.simulator.device import Device
 from rippleb.simulator.ripple import bridge_ripple
@@ -49,13 +48,10 @@ def strain_bridge(device: Device, sc: Scenario, t, theta_m, tau, noise, output_a
     return quantise(volts, sc.faults.strain_full_scale or STRAIN_RANGE, STRAIN_BITS)
 
 
-def current_sense(device: Device, sc: Scenario, spec: JointSpec, theta_m, w_m, a_m, tau, noise):
-    """Motor current [A]: (tau/N + J_m theta_m'' + friction + cogging) / K_t + offset + noise."""
-    motor_torque = (tau / spec.gear_ratio + spec.rotor_inertia * a_m
-                    + device.motor_friction(w_m, tau, theta_m, sc.temperature_c, spec.gear_ratio)
-                    + device.cogging(theta_m))
-    amps = (motor_torque / spec.torque_constant + device.current_offset
-            + CURRENT_NOISE * noise.standard_normal(len(theta_m)))
+def current_sense(sc: Scenario, commanded: np.ndarray, offset: float, noise) -> np.ndarray:
+    """Motor current [A]: the commanded current (the current loop is ideal) + the
+    sense's offset + noise, through the ADC."""
+    amps = commanded + offset + CURRENT_NOISE * noise.standard_normal(len(commanded))
     if sc.faults.current_offset:   # fault: shifted current-sense zero [A]
         amps = amps + sc.faults.current_offset
     return quantise(amps, CURRENT_RANGE, CURRENT_BITS)

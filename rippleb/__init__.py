@@ -3,7 +3,7 @@
 The public API is re-exported here; see the README for the CLI.
 """
 
-from rippleb.conditions import CONDITIONS, DEFAULT_CONDITION
+from rippleb.simulator.conditions import CONDITIONS, DEFAULT_CONDITION
 from rippleb.dask_executor import DaskExecutor
 from rippleb.data import JointSpec, SensorBlock, SensorLog, make_log, read_log, write_log
 from rippleb.errors import InputError, PluginError, RipplebError

@@ -81,7 +81,7 @@ def run_task(task: RowTask, cache: Path, registry, memo: dict | None = None) -> 
     state.open_rows[case] += 1  # keep the truth after the row is recorded, for the memo
     memo = {} if memo is None else memo
     _restore(state, memo)
-    schedule(Pool(1, task.memory_mb), state, _NoBar())
+    schedule(Pool(1, task.memory_mb, context=registry), state, _NoBar())
     for c in (case, cal_case):
         if c in state.artefacts and (c.role == FITTING or c in state.truths):
             memo[c] = (state.artefacts[c], state.truths.get(c), state.lengths.get(c), state.logs.get(c))

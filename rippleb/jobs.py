@@ -10,8 +10,9 @@
 
 Artefacts are verified (:class:`rippleb.cache.Artefact`) *before* the method's code is
 imported, so a method cannot rewrite an input between verification and use by earlier
-code of its own. The forked pool (:mod:`rippleb.pool`) inherits the registry; another
-executor passes one.
+code of its own. :class:`Job` is a job as data, for the fork server
+(:mod:`rippleb.forkserver`), which passes the registry it inherited; another executor
+passes one.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import json
 import pickle
 import time
 import traceback
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -34,6 +36,29 @@ from rippleb.streaming import InvalidOutput, prepare_blocks, stream
 #: Everything the metrics compare with: the per-sample arrays and events of
 #: :class:`~rippleb.metrics.Truth` (its own list) plus the two torque columns.
 TRUTH_ARRAYS = metrics.TRUTH_ARRAYS + ("torque_true", "torque_ref")
+
+
+@dataclass(frozen=True)
+class Job:
+    """A job as data, so it can be sent to the process that forks it
+    (:mod:`rippleb.forkserver`): ``job(registry)`` runs it and returns message bytes.
+
+    ``kind`` is ``simulate`` (``args`` of :func:`simulate_case`), ``fit`` (of
+    :func:`fit_method` without the registry) or ``row`` (of :func:`run_row` without the
+    registry: method, params, calibration, evaluation, fitted, fit_info).
+    """
+
+    kind: str
+    args: tuple
+
+    def __call__(self, registry) -> bytes:
+        if self.kind == "simulate":
+            return simulate_case(*self.args)
+        if self.kind == "fit":
+            return fit_method(*self.args, registry)
+        method, params, calibration, evaluation, fitted, fit_info = self.args
+        return row_message(run_row(method, params, calibration, evaluation, registry,
+                                   fitted=fitted, fit_info=fit_info))
 
 
 def visible_log(log: SensorLog, role: str) -> SensorLog:

@@ -9,6 +9,10 @@ every inherited file descriptor closed but its result pipe, and with its output 
 to a file. At the job's deadline, or when the job ends, the worker and everything it
 started are killed.
 
+In a local run the keepers are forked by a fork server (:mod:`rippleb.forkserver`) that
+was forked before the first simulation, so no job's memory holds a truth; without a server
+(a Dask worker's row, ``rippleb list``'s import probes) the keeper is forked from here.
+
 The worker sends its result as bytes through a pipe: a tag byte (``D`` done, ``R``
 raised) and the payload. The parent never unpickles what a worker sends; the payload's
 format is the job's business (:mod:`rippleb.cache` encodes plain arrays). A worker that
@@ -20,6 +24,7 @@ from __future__ import annotations
 import atexit
 import contextlib
 import errno
+import functools
 import gc
 import os
 import resource
@@ -59,6 +64,7 @@ class _Running:
     started: float
     deadline: float | None
     max_bytes: int
+    direct: bool = True    # the keeper is our child (else the fork server's)
     result: bytearray = field(default_factory=bytearray)
     ctrl: bytearray = field(default_factory=bytearray)
     result_eof: bool = False
@@ -88,11 +94,18 @@ class Pool:
         Jobs running at once.
     memory_mb
         Extra address space a worker may map beyond what it inherits [MB]; None for no limit.
+    context
+        Passed to every job: a job runs as ``job(context)``, or ``job()`` when None.
+    server
+        A :class:`rippleb.forkserver.ForkServer` to fork the keepers (it passes its own
+        context); jobs must then be picklable. None forks them from this process.
     """
 
-    def __init__(self, size: int = 1, memory_mb: float | None = None):
+    def __init__(self, size: int = 1, memory_mb: float | None = None, context=None, server=None):
         self.size = size
         self.memory_mb = memory_mb
+        self.context = context
+        self.server = server
         self._running: list[_Running] = []
 
     @property
@@ -107,23 +120,31 @@ class Pool:
 
     def submit(self, key, fn, timeout: float | None = None, output: str | None = None,
                max_bytes: int | None = None) -> None:
-        """Start ``fn()`` in an isolated worker; its stdout and stderr go to the file
-        ``output`` (or /dev/null), so a chatty plugin cannot garble the CLI's output."""
+        """Start ``fn`` (see ``context``) in an isolated worker; its stdout and stderr go to
+        the file ``output`` (or /dev/null), so a chatty plugin cannot garble the CLI's output."""
         reap_exiting()
         result_r, result_w = os.pipe()
         ctrl_r, ctrl_w = os.pipe()
-        sys.stdout.flush()
-        sys.stderr.flush()
-        pid = os.fork()
-        if pid == 0:
-            _keeper(fn, result_w, ctrl_w, self.memory_mb, output)  # never returns
-        os.close(result_w)
-        os.close(ctrl_w)
+        if self.server is not None:
+            try:
+                pid = self.server.spawn(fn, result_w, ctrl_w, self.memory_mb, output)
+            finally:
+                os.close(result_w)
+                os.close(ctrl_w)
+        else:
+            bound = fn if self.context is None else functools.partial(fn, self.context)
+            sys.stdout.flush()
+            sys.stderr.flush()
+            pid = os.fork()
+            if pid == 0:
+                keeper(bound, result_w, ctrl_w, self.memory_mb, output)  # never returns
+            os.close(result_w)
+            os.close(ctrl_w)
         for fd in (result_r, ctrl_r):
             os.set_blocking(fd, False)
         now = time.monotonic()
         self._running.append(_Running(key, pid, result_r, ctrl_r, now, now + timeout if timeout else None,
-                                      max_bytes or DEFAULT_MAX_BYTES))
+                                      max_bytes or DEFAULT_MAX_BYTES, direct=self.server is None))
 
     def wait(self) -> list[Finished]:
         """Block until at least one job ends (or passes its deadline); return those that did."""
@@ -209,7 +230,10 @@ def _end(run: _Running, exiting: list | None = None) -> None:
     if run.exit_code is None and run.worker is not None:
         with contextlib.suppress(ProcessLookupError, PermissionError):
             os.kill(run.worker, signal.SIGKILL)
-    if cleaned:
+    if not run.direct:  # the fork server reaps it: only make sure it is gone
+        if run.exit_code is None:
+            _await_keeper_exit(run)
+    elif cleaned:
         exiting.append((run.keeper, time.monotonic() + KEEPER_GRACE_S))
     else:
         _wait_keeper(run.keeper)
@@ -259,6 +283,19 @@ def reap_exiting(block: bool = False) -> None:
 atexit.register(reap_exiting, True)
 
 
+def _await_keeper_exit(run: _Running, grace_s: float = KEEPER_GRACE_S) -> None:
+    """Wait until a keeper that is not our child has exited (its end of the control pipe
+    closes); if it has not within ``grace_s``, end its whole session."""
+    deadline = time.monotonic() + grace_s
+    while not run.ctrl_eof and time.monotonic() < deadline:
+        with contextlib.suppress(InterruptedError):
+            select.select([run.ctrl_fd], [], [], 0.05)
+        _read(run)
+    if not run.ctrl_eof:
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(run.keeper, signal.SIGKILL)
+
+
 def _wait_keeper(keeper: int, grace_s: float = KEEPER_GRACE_S) -> None:
     """Reap ``keeper``; if it has not exited within ``grace_s``, end its whole session."""
     deadline = time.monotonic() + grace_s
@@ -273,8 +310,9 @@ def _wait_keeper(keeper: int, grace_s: float = KEEPER_GRACE_S) -> None:
         os.waitpid(keeper, 0)
 
 
-def _keeper(fn, result_w: int, ctrl_w: int, memory_mb, output) -> None:
-    """rippleb's own process between the runner and a job: session, namespace, cleanup."""
+def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output) -> None:
+    """rippleb's own process between the runner and a job: session, namespace, cleanup.
+    Runs ``fn()`` in a worker it forks; never returns."""
     try:
         _keep_inherited_pages_shared()
         signal.signal(signal.SIGINT, signal.SIG_IGN)

@@ -24,6 +24,7 @@ environmental reason. See ``docs/robustness.md``.
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import tempfile
 import time
@@ -37,6 +38,7 @@ from rippleb.checks import check_calibration, check_options, check_recording, ch
 from rippleb.simulator.conditions import DEFAULT_CONDITION
 from rippleb.data import SensorLog
 from rippleb.errors import InputError
+from rippleb.forkserver import ForkServer
 from rippleb.metrics import Truth, score, tick_stats
 from rippleb.pool import Pool
 from rippleb.registry import Registry
@@ -215,7 +217,12 @@ def resolve_methods(registry: Registry, methods) -> list[str]:
 
 def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, progress, config,
              on_start=None, executor=None):
-    with run_dir(out, resume, config) as out_dir:
+    # The local jobs are forked by a server forked now, before the first simulation, so
+    # no job's memory ever holds a truth (rippleb.forkserver). Another executor runs its
+    # rows elsewhere.
+    server = (ForkServer.start(registry, preload=lambda: _warm(registry, plan)) if executor is None
+              else contextlib.nullcontext())
+    with server, run_dir(out, resume, config) as out_dir:
         if on_start is not None:
             on_start()
         results = ResultsFile(out_dir / "results.csv" if out_dir else None, resume=resume)
@@ -232,11 +239,25 @@ def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, pro
             with progress_bar(len(rows), progress) as bar, sigterm_as_interrupt():
                 prepare_cases(state)
                 if executor is None:
-                    schedule(Pool(int(jobs), memory_mb), state, bar)
+                    schedule(Pool(int(jobs), memory_mb, server=server), state, bar)
                 else:  # whole rows run elsewhere; this process only records them
                     executor.run(row_tasks(state, memory_mb), lambda key, fields: record(state, key, bar, **fields))
         results.flush()
     return results.frame()
+
+
+def _warm(registry, plan: Plan) -> None:
+    """Load in the fork server what the jobs of ``plan`` would each load again: the
+    simulator with the arm models of its scenarios, and its built-in methods with their
+    compiled kernels. Plugins are not imported here: only workers run plugin code."""
+    from rippleb.simulator import robot
+
+    for scenario, _ in plan.sims.values():
+        robot.load_model(scenario.robot)
+    for method in {key.method for key in plan.rows}:
+        entry = registry.entries.get(method)
+        if entry is not None and entry.origin == "builtin" and not entry.broken:
+            entry.load()
 
 
 def default_out_dir() -> Path:

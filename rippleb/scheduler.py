@@ -180,10 +180,8 @@ def _output(state: State, stem: str) -> str | None:
     return str(state.log_dir / f"{safe_name(stem)}.txt") if state.log_dir else None
 
 
-def _sim_job(scenario, sim: tuple, paths: dict):
-    def job():
-        return job_fns.simulate_case(scenario, sim[3], sim[2], paths)
-    return job
+def _sim_job(scenario, sim: tuple, paths: dict) -> job_fns.Job:
+    return job_fns.Job("simulate", (scenario, sim[3], sim[2], paths))
 
 
 def _finish_sim(fin, state: State) -> None:
@@ -202,14 +200,10 @@ def _finish_sim(fin, state: State) -> None:
     state.sims[fin.key] = "done"
 
 
-def _fit_job(fit: Fit, state: State):
+def _fit_job(fit: Fit, state: State) -> job_fns.Job:
     calibration = state.artefacts[fit.calibration]
     path = state.cache / f"fit-{digest(repr(fit).encode())[:32]}.pkl"
-    registry = state.registry
-
-    def job():
-        return job_fns.fit_method(fit.method, None, calibration, path, registry)
-    return job
+    return job_fns.Job("fit", (fit.method, None, calibration, path))
 
 
 def _fit_outcome(fin, state: State) -> dict:
@@ -233,8 +227,8 @@ def _environment_first(message: str) -> str:
 def _evaluation_log(state: State, case: Case) -> SensorLog:
     """The visible log of a scored case, read and verified here once for all its rows.
 
-    A row's process is forked from this one, so it inherits the log instead of reading
-    and hashing the file again (the hash of a one-second log cost each row more than its
+    Each row's job carries it (to the fork server, which forks the row), so no row reads
+    and hashes the file again (the hash of a one-second log cost each row more than its
     own process start). A file rewritten before this read fails the rows that would
     use it, as a row's own check did; one rewritten after it changes nothing.
     """
@@ -243,17 +237,12 @@ def _evaluation_log(state: State, case: Case) -> SensorLog:
     return state.logs[case]
 
 
-def _row_job(key: RowKey, state: State, fit: dict, evaluation: SensorLog):
+def _row_job(key: RowKey, state: State, fit: dict, evaluation: SensorLog) -> job_fns.Job:
     case, cal_case = state.plan.rows[key]
     calibration = state.artefacts[cal_case]
     fitted = Artefact(**fit["fitted"]) if isinstance(fit.get("fitted"), dict) else None
     fit_info = {k: fit[k] for k in ("params", "fit_s") if k in fit} if fitted else None
-    registry = state.registry
-
-    def job():
-        return job_fns.row_message(job_fns.run_row(key.method, None, calibration, evaluation, registry,
-                                                   fitted=fitted, fit_info=fit_info))
-    return job
+    return job_fns.Job("row", (key.method, None, calibration, evaluation, fitted, fit_info))
 
 
 def _finish_row(fin, state: State, bar) -> None:

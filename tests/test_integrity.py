@@ -84,6 +84,32 @@ HOSTILE = textwrap.dedent('''
             self.pos += n
             return out
 
+    def _truths_in_memory():
+        """Scored truths anywhere in this process: a Truth object the garbage collector
+        tracks, or one a frame up the stack holds (the runner's, if this process is a fork
+        of it)."""
+        import gc, sys
+        def is_truth(value):
+            return type(value).__name__ == "Truth" and getattr(value, "torque_true", None) is not None
+        found = sum(is_truth(o) for o in gc.get_objects())
+        frame = sys._getframe()
+        while frame is not None:
+            for value in list(frame.f_locals.values()):
+                truths = getattr(value, "truths", None)
+                found += is_truth(value) + (len(truths) if isinstance(truths, dict) else 0)
+            frame = frame.f_back
+        return found
+
+    class Rummager(Method):
+        """Searches its own process's memory for the truth it is scored on."""
+        name = "rummager"
+        def reset(self, spec):
+            found = _truths_in_memory()
+            if found:
+                raise RuntimeError(f"found {found} truths in my own memory")
+        def step(self, block):
+            return block.strain * 0.0
+
     class Spawner(Method):
         """Leaves a detached process, and a forked grandchild in its own session."""
         name = "spawner"
@@ -151,7 +177,8 @@ EXITS = "raise SystemExit(3)\n"
 def site(tmp_path_factory):
     site = tmp_path_factory.mktemp("hostile-site")
     _dist(site, "rippleb-hostile", "rippleb_hostile", HOSTILE,
-          {"forger": "Forger", "peeker": "Peeker", "spawner": "Spawner", "killer": "Killer"})
+          {"forger": "Forger", "peeker": "Peeker", "spawner": "Spawner", "killer": "Killer",
+           "rummager": "Rummager"})
     _dist(site, "rippleb-slow", "rippleb_slow", SLOW_IMPORT, {"slow-import": "Anything"})
     _dist(site, "rippleb-exits", "rippleb_exits", EXITS, {"exits": "Anything"})
     _dist(site, "rippleb-napper", "rippleb_napper", NAPPER, {"napper": "Napper"})
@@ -193,10 +220,10 @@ def test_hostile_plugins_cannot_peek_escape_or_kill(site, tmp_path):
     clean = _run(site, tmp_path, tmp_path / "clean", "raw,lowpass", jobs="1")
     assert clean.returncode == 0, clean.stderr
     reference = pd.read_csv(tmp_path / "clean" / "results.csv").set_index("method")
-    proc = _run(site, tmp_path, tmp_path / "hostile", "peeker,spawner,killer,raw,lowpass")
+    proc = _run(site, tmp_path, tmp_path / "hostile", "peeker,spawner,killer,rummager,raw,lowpass")
     assert proc.returncode == 0, proc.stderr      # the killer did not end the run
     rows = pd.read_csv(tmp_path / "hostile" / "results.csv").set_index("method")
-    assert sorted(rows.index) == ["killer", "lowpass", "peeker", "raw", "spawner"]
+    assert sorted(rows.index) == ["killer", "lowpass", "peeker", "raw", "rummager", "spawner"]
     assert (rows.status == "ok").all(), rows.message.to_dict()
     for method in ("raw", "lowpass"):
         assert rows.loc[method, "rms_error_nm"] == reference.loc[method, "rms_error_nm"]

@@ -20,7 +20,8 @@ import pytest
 
 from test_bad_input import _dist  # a minimal installed distribution without pip
 
-pytestmark = pytest.mark.slow
+# one xdist worker runs the whole file (a module fixture): see pyproject.toml
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("test_integrity")]
 
 HOSTILE = textwrap.dedent('''
     import glob, io, os, signal, subprocess, sys, tempfile, time

@@ -21,9 +21,6 @@ import pytest
 
 from rippleb import InputError, load_scenario, read_log
 
-# one xdist worker runs the whole file (one module fixture runs every bad-input case once): see pyproject.toml
-pytestmark = pytest.mark.xdist_group("test_bad_input")
-
 GOOD = textwrap.dedent("""\
     [robot]
     posture = { elbow_joint = 1.5 }

@@ -11,9 +11,6 @@ from rippleb.jobs import truth_from_message, truth_message
 from rippleb.runner import evaluate
 from rippleb.simulator import simulate
 
-# one xdist worker runs the whole file (a module fixture): see pyproject.toml
-pytestmark = pytest.mark.xdist_group("test_bandwidth")
-
 SEED = 900
 
 

@@ -18,8 +18,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-# one xdist worker runs the whole file (its clusters, started one test at a time): see pyproject.toml
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("test_dask")]
+pytestmark = pytest.mark.slow
 
 BIN = Path(sys.executable).parent
 ACCURACY = ["rms_error_nm", "max_error_nm", "rms_error_ref_nm", "max_error_ref_nm", "delay_ms",

@@ -18,9 +18,6 @@ from rippleb import InputError, make_log
 from rippleb.scenario import Faults, scenario_from_dict
 from rippleb.simulator import STRAIN_RANGE, simulate
 
-# one xdist worker runs the whole file (module fixtures): see pyproject.toml
-pytestmark = pytest.mark.xdist_group("test_faults")
-
 ROOT = Path(__file__).resolve().parents[1]
 _spec = importlib.util.spec_from_file_location("fault_table", ROOT / "benchmarks" / "fault_table.py")
 fault_table = importlib.util.module_from_spec(_spec)

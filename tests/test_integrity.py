@@ -20,8 +20,7 @@ import pytest
 
 from test_bad_input import _dist  # a minimal installed distribution without pip
 
-# one xdist worker runs the whole file (a module fixture): see pyproject.toml
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("test_integrity")]
+pytestmark = pytest.mark.slow
 
 HOSTILE = textwrap.dedent('''
     import glob, io, os, signal, subprocess, sys, tempfile, time

@@ -11,9 +11,6 @@ import pytest
 from rippleb import JointSpec, make_log, read_log, write_log
 from rippleb.methods.kalman_ripple import KalmanRipple, kf_step, phasor_table, tick_regressors
 
-# one xdist worker runs the whole file (module fixtures): see pyproject.toml
-pytestmark = pytest.mark.xdist_group("test_kalman_ripple")
-
 SPEC = JointSpec()
 GAIN = 40.0       # Nm/V of the synthetic bridge
 OFFSET_V = 0.1    # V

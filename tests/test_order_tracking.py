@@ -20,9 +20,6 @@ from rippleb.methods.order_tracking import (OrderTracking, OrderTrackingNoBackpr
                                             OrderTrackingNoDeadzone, crossings,
                                             design_notches, notch)
 
-# one xdist worker runs the whole file (simulations and scores cached per process): see pyproject.toml
-pytestmark = pytest.mark.xdist_group("test_order_tracking")
-
 SEEDS = range(3)              # 5 seeds in docs/methods/order-tracking.md; 3 keep this fast
 VARIANTS = (OrderTracking, OrderTrackingNoDeadzone, OrderTrackingNoBackprop)
 

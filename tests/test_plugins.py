@@ -11,8 +11,7 @@ import pandas as pd
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-# one xdist worker runs the whole file (a module fixture installs the plugins once): see pyproject.toml
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("test_plugins")]
+pytestmark = pytest.mark.slow
 
 MISBEHAVING = '''
 import time

@@ -15,7 +15,7 @@ import pytest
 from scipy import signal
 
 from rippleb import builtin_scenarios, load_scenario, simulate
-from rippleb import robot
+from rippleb.simulator import robot
 from rippleb.scenario import scenario_from_dict
 
 
@@ -72,3 +72,53 @@ def test_scaling_with_duration(benchmark, factor):
     benchmark.extra_info["samples"] = int(2.0 * factor * scenario.spec.fs)
     sim = benchmark(simulate, scenario, 0)
     assert len(sim.log) == int(round(2.0 * factor * scenario.spec.fs))
+
+
+def _kernel_inputs(seconds: float):
+    """The closed-loop joint's integrator inputs for the first ``seconds`` of paper-quintic."""
+    from rippleb.simulator import Device, controller, joint
+
+    sc = load_scenario("paper-quintic")
+    spec, device = sc.spec, Device.from_seed(0)
+    t = np.arange(int(round(seconds * spec.fs))) / spec.fs
+    traj = sc.trajectory(t)
+    table = joint.load_table(sc, sc.trajectory(np.arange(int(sc.duration * spec.fs)) / spec.fs)[0])
+    gains = controller.design_gains(spec, float(np.mean(table.inertia)))
+    tau_ref = table.model_torque(traj[0], traj[2])
+    ref = controller.reference(spec, t, *traj, tau_ref, device.encoder_zero)
+    params = joint.pack_params(**controller.motor_params(device, sc.temperature_c, spec),
+                               **controller.loop_params(spec, gains, table))
+    inputs = np.ascontiguousarray(np.vstack([np.zeros_like(t), ref]))
+    state0 = controller.initial_state(spec, gains, table, traj[0][0], 0.0, 0.0, ref[:, 0], device.encoder_zero)
+    return params, controller.table_rows(table), inputs, state0, np.empty((6, len(t)))
+
+
+def test_compiled_kernel_pays():
+    """The joint's per-sample loop compiled (numba, cached on disk) against the same loop
+    body run by the interpreter (its helpers stay compiled: a lower bound of the gain), and the cost of loading the compiled kernels in a fresh
+    process (what every ``rippleb simulate`` pays on top of the simulation)."""
+    import subprocess
+    import sys
+
+    from rippleb.simulator import joint
+
+    args = _kernel_inputs(0.2)
+    t0 = time.perf_counter()
+    joint.integrate.py_func(*args)
+    python = time.perf_counter() - t0
+    best = np.inf
+    for _ in range(3):
+        t0 = time.perf_counter()
+        joint.integrate(*args)
+        best = min(best, time.perf_counter() - t0)
+    # -X importtime: the joint module's own import time is loading its cached kernels
+    report = subprocess.run([sys.executable, "-X", "importtime", "-c", "import rippleb"], capture_output=True,
+                            text=True, check=True).stderr.splitlines()
+    own = [int(line.split("|")[0].split(":")[1]) for line in report if line.rstrip().endswith(" rippleb.simulator.joint")]
+    load = own[0] * 1e-6
+    n = args[2].shape[1]
+    print(f"\njoint kernel over {n} samples: interpreted {python * 1e3:.0f} ms, compiled {best * 1e3:.2f} ms "
+          f"({python / best:.0f}x); loading the joint's compiled kernels in a fresh process {load * 1e3:.0f} ms; "
+          f"the compiled loop over 4 s of paper-quintic would cost "
+          f"{best * 20 * 1e3:.0f} ms, the interpreted one {python * 20:.1f} s")
+    assert python > best

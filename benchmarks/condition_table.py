@@ -16,7 +16,7 @@ import copy
 
 import numpy as np
 
-from rippleb.conditions import CONDITIONS
+from rippleb.simulator.conditions import CONDITIONS
 from rippleb.metrics import Truth, score
 from rippleb.registry import Registry
 from rippleb.simulator import simulate

@@ -12,8 +12,8 @@ from typing import TYPE_CHECKING
 #: ``import rippleb`` and ``python -m rippleb --help`` do not pay for numba, scipy and
 #: pinocchio until a name that needs them is asked for.
 _EXPORTS = {
-    "CONDITIONS": "rippleb.conditions",
-    "DEFAULT_CONDITION": "rippleb.conditions",
+    "CONDITIONS": "rippleb.simulator.conditions",
+    "DEFAULT_CONDITION": "rippleb.simulator.conditions",
     "DaskExecutor": "rippleb.dask_executor",
     "JointSpec": "rippleb.data",
     "SensorBlock": "rippleb.data",
@@ -37,7 +37,7 @@ _EXPORTS = {
 }
 
 if TYPE_CHECKING:  # what static tools see: the same names, imported eagerly
-    from rippleb.conditions import CONDITIONS, DEFAULT_CONDITION
+    from rippleb.simulator.conditions import CONDITIONS, DEFAULT_CONDITION
     from rippleb.dask_executor import DaskExecutor
     from rippleb.data import JointSpec, SensorBlock, SensorLog, make_log, read_log, write_log
     from rippleb.errors import InputError, PluginError, RipplebError

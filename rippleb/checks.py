@@ -30,7 +30,7 @@ def check_options(*, jobs, timeout, memory_mb) -> None:
 
 def check_scenario(scenario) -> None:
     """Refuse a scenario outside the joint's position or speed limits, or not finite."""
-    from rippleb import robot as arm
+    from rippleb.simulator import robot as arm
 
     model = arm.load_model(scenario.robot)
     joint = model.joints[model.getJointId(scenario.joint)]

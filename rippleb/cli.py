@@ -191,7 +191,7 @@ LIST_WIDTH = 100
 
 def cmd_list(args) -> int:
     """``rippleb list``."""
-    from rippleb.conditions import CONDITIONS
+    from rippleb.simulator.conditions import CONDITIONS
     from rippleb.registry import Registry
     from rippleb.scenario import builtin_scenarios, load_scenario
 
@@ -427,7 +427,7 @@ def _refuse_with_log(args) -> None:
 
 def cmd_simulate(args) -> int:
     """``rippleb simulate``."""
-    from rippleb.conditions import check_condition
+    from rippleb.simulator.conditions import check_condition
     from rippleb.data import write_log
     from rippleb.runner import check_scenario
     from rippleb.scenario import load_scenario

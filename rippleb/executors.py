@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from rippleb.conditions import DEFAULT_CONDITION
+from rippleb.simulator.conditions import DEFAULT_CONDITION
 from rippleb.pool import Pool
 from rippleb.results import ResultsFile
 from rippleb.rows import CALIBRATION, FITTING, SCORED, Case, RowKey, scenario_hash

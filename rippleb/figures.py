@@ -239,7 +239,7 @@ def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
         ``{name: (path, caption)}`` in README order, and one line per method or figure
         that could not be drawn.
     """
-    from rippleb.conditions import DEFAULT_CONDITION
+    from rippleb.simulator.conditions import DEFAULT_CONDITION
     from rippleb.provenance import seeds_text
     from rippleb.results import swept_columns
     from rippleb.stats import method_order, with_condition

@@ -230,7 +230,7 @@ def _restart_figure(frame, seed, signals):
     rate (the last sample of each tick: what a controller reads), zoomable."""
     import plotly.graph_objects as go
 
-    from rippleb.conditions import DEFAULT_CONDITION
+    from rippleb.simulator.conditions import DEFAULT_CONDITION
 
     ok = frame[(frame["status"] == "ok") & (frame["condition"] == DEFAULT_CONDITION)]
     if seed is None or "stop-restart" not in set(ok["scenario"]):

@@ -3,8 +3,9 @@
 A job runs in two processes (:mod:`rippleb.pool`): a *keeper*, rippleb's own code, and
 the *worker* it forks, which runs the job. The keeper
 
-* starts a new session (``setsid``), so a worker that signals "its" process group
-  reaches only itself and its own children, never the runner;
+* starts a new session (``setsid``), and puts the worker in a process group of its own,
+  so a worker that signals "its" process group reaches only itself and its own children,
+  never the runner nor the keeper that reports how it ended;
 * moves the worker into a new PID namespace (``unshare(CLONE_NEWUSER | CLONE_NEWPID)``,
   allowed to unprivileged users on most Linux systems). The worker is then PID 1 of its
   namespace: it cannot name the runner's PID to signal it, and when it ends the kernel

@@ -178,19 +178,31 @@ def _lag_correlation(estimate, truth, mask, fs, max_delay_s) -> np.ndarray | Non
     return None if not np.isfinite(r).any() else r
 
 
+def _half_step(y: np.ndarray, i0: int, end: int, baseline: int, change: float) -> int | None:
+    """First sample ``n >= i0`` (before ``end``) where ``y`` has moved by half of ``change``
+    from its mean over the ``baseline`` samples before ``i0``; None if it never does."""
+    level = np.mean(y[i0 - baseline: i0])
+    reached = np.flatnonzero(np.sign(change) * (y[i0:end] - level) >= 0.5 * abs(change))
+    return i0 + int(reached[0]) if len(reached) else None
+
+
 def step_latency_ms(estimate: np.ndarray, truth_info: Truth) -> float:
-    """Mean time [ms] from each known torque step to 50 % of it in the estimate.
+    """Mean time [ms] from each known torque step's 50 % point in the true torque to 50 %
+    of it in the estimate.
 
     The steps are the edges ``(start, rise, change)`` of the scenario's step loads
-    (``Truth.steps``) with ``rise <= 100 ms`` whose start lies in ``W``. The true load
-    passes half its change at ``t50 = start + rise / 2`` (the smooth edge is symmetric).
-    The estimate's level before the edge is its mean ``b`` over the 10 ms before
-    ``start``; it reaches 50 % at the first sample ``n >= start`` with
-    ``sign(change) (y[n] - b) >= |change| / 2``, searched until 200 ms after ``t50`` or
-    the next edge's start. The step's latency is ``n / fs - t50`` (negative if the
-    estimate leads), or 200 ms if it never gets there. NaN if there is no such step.
+    (``Truth.steps``) with ``rise <= 100 ms`` whose start lies in ``W``. A signal's level
+    before the edge is its mean over the 10 ms before ``start``; it reaches 50 % at the
+    first sample ``n >= start`` where it has moved by ``|change| / 2`` in the step's
+    direction, searched until 200 ms after the load's own half point ``start + rise / 2``
+    or the next edge's start. The truth's 50 % point ``t50`` is that of ``torque_true``
+    (the shaft torque lags the load by the joint's own dynamics), or ``start + rise / 2``
+    where the true torque is not known or never gets there. The step's latency is the
+    estimate's ``n / fs - t50`` (negative if the estimate leads), or 200 ms if it never
+    gets there. NaN if there is no such step.
     """
     fs, mask, y = truth_info.fs, truth_info.eval_mask, np.asarray(estimate, float)
+    truth = None if truth_info.torque_true is None else np.asarray(truth_info.torque_true, float)
     steps = np.asarray(truth_info.steps, float).reshape(-1, 3)
     starts = np.round(steps[:, 0] * fs).astype(np.int64)
     baseline = max(1, int(round(STEP_BASELINE_S * fs)))
@@ -202,9 +214,11 @@ def step_latency_ms(estimate: np.ndarray, truth_info: Truth) -> float:
         t50 = start + 0.5 * rise
         end = min(int(round((t50 + STEP_HORIZON_S) * fs)) + 1, len(y),
                   *[s for s in starts[k + 1:] if s > i0])
-        level = np.mean(y[i0 - baseline: i0])
-        reached = np.flatnonzero(np.sign(change) * (y[i0:end] - level) >= 0.5 * abs(change))
-        latencies.append((i0 + reached[0]) / fs - t50 if len(reached) else STEP_HORIZON_S)
+        true_half = None if truth is None else _half_step(truth, i0, end, baseline, change)
+        if true_half is not None:
+            t50 = true_half / fs
+        reached = _half_step(y, i0, end, baseline, change)
+        latencies.append(reached / fs - t50 if reached is not None else STEP_HORIZON_S)
     return 1000.0 * float(np.mean(latencies)) if latencies else float("nan")
 
 

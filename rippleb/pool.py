@@ -235,6 +235,10 @@ def _keeper(fn, result_w: int, ctrl_w: int, memory_mb, output) -> None:
         isolation.become_subreaper()
         worker = os.fork()
         if worker == 0:
+            # Its own process group: a worker that signals "its" group (killpg(0, ...), or
+            # kill(0, ...), which is what kill(getppid()) becomes inside a PID namespace)
+            # must not reach the keeper, whose death would lose the row it reports.
+            os.setpgid(0, 0)
             os.close(ctrl_w)
             _worker(fn, result_w, memory_mb, output)  # never returns
         os.close(result_w)

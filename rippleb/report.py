@@ -67,7 +67,7 @@ def tables_markdown(frame) -> str:
 
 
 def _condition_section(condition: str, rows, source: str) -> list[str]:
-    from rippleb.conditions import CONDITIONS
+    from rippleb.simulator.conditions import CONDITIONS
 
     what = CONDITIONS.get(condition, "not a built-in condition")
     parts = [f"## Condition `{condition}`: {what}", ""]

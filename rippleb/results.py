@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rippleb.conditions import DEFAULT_CONDITION
+from rippleb.simulator.conditions import DEFAULT_CONDITION
 from rippleb.errors import InputError
 from rippleb.files import atomic_path
 from rippleb.metrics import METRIC_COLUMNS

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rippleb.conditions import CONDITIONS, DEFAULT_CONDITION, check_condition
+from rippleb.simulator.conditions import CONDITIONS, DEFAULT_CONDITION, check_condition
 from rippleb.errors import InputError
 
 CALIBRATION = "calibration"

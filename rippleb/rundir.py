@@ -15,7 +15,7 @@ import json
 import warnings
 from pathlib import Path
 
-from rippleb.conditions import DEFAULT_CONDITION
+from rippleb.simulator.conditions import DEFAULT_CONDITION
 from rippleb.errors import InputError
 from rippleb.files import atomic_path
 from rippleb.results import RunWarning

@@ -34,7 +34,7 @@ import numpy as np
 from rippleb import jobs as job_fns
 from rippleb.cache import digest, log_bytes
 from rippleb.checks import check_calibration, check_options, check_recording, check_scenario
-from rippleb.conditions import DEFAULT_CONDITION
+from rippleb.simulator.conditions import DEFAULT_CONDITION
 from rippleb.data import SensorLog
 from rippleb.errors import InputError
 from rippleb.metrics import Truth, score, tick_stats
@@ -72,7 +72,7 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, s
     seeds
         The number of seeds (devices) ``seed_start .. seed_start + seeds - 1``, or a list of seeds.
     conditions
-        Deployment conditions (``rippleb.conditions.CONDITIONS``, a list or ``"a,b"``, or
+        Deployment conditions (``rippleb.simulator.conditions.CONDITIONS``, a list or ``"a,b"``, or
         ``"all"``); None for ``same-session`` only.
     seed_start
         First seed when ``seeds`` is a number.

@@ -25,7 +25,6 @@ from pathlib import Path
 import numpy as np
 
 from rippleb.data import JointSpec
-from rippleb.drive_ripple import RippleSettings
 from rippleb.errors import InputError
 from rippleb.profiles import DEFAULT_RISE, Load, Segment, evaluate_segments  # noqa: F401 (re-exported)
 
@@ -38,7 +37,8 @@ _TOP_KEYS = {"description": (str,), "scored": (bool,), "duration": _NUMBER,
              "temperature_c": _NUMBER, "evaluation": (dict,), "joint": (dict,),
              "robot": (dict,), "trajectory": (dict,), "load": (list,), "faults": (dict,),
              "ripple": (dict,)}
-_RIPPLE_KEYS = {"output_scale": _NUMBER, "hysteresis_nm": _NUMBER, "temperature_coeff": _NUMBER}
+_RIPPLE_KEYS = {"output_scale": _NUMBER, "hysteresis_nm": _NUMBER, "temperature_coeff": _NUMBER,
+                "drift": _NUMBER}
 _EVAL_KEYS = {"start": _NUMBER, "stop": _NUMBER}
 _JOINT_KEYS = {f.name: ((int,) if f.type in ("int", int) else _NUMBER)
                for f in dataclasses.fields(JointSpec)}
@@ -75,6 +75,43 @@ MAX_LOAD_FACTOR = 10.0
 DEFAULT_ROBOT = "ur5"
 DEFAULT_JOINT = "shoulder_lift_joint"
 DEFAULT_TEMPERATURE_C = 40.0
+#: The temperature catalogue values refer to; friction and ripple scale from it.
+REFERENCE_TEMPERATURE_C = 25.0
+#: Width of the strain hysteresis loop [Nm] (1 % of the 51 Nm rating). **Estimate**, see
+#: docs/physics.md, "Output-locked ripple, temperature, hysteresis".
+HYSTERESIS_NM = 0.5
+#: Relative change of every ripple amplitude per kelvin from 25 degC. Off: no source.
+RIPPLE_TEMP_COEFF = 0.0
+
+
+@dataclass(frozen=True)
+class RippleSettings:
+    """What a scenario's ``[ripple]`` table sets (all optional); the defaults are the
+    simulator's physics (:mod:`rippleb.simulator.ripple`).
+
+    Attributes
+    ----------
+    output_scale
+        Multiplies the output-locked ripple amplitudes (0 turns it off).
+    hysteresis_nm
+        Width [Nm] of the strain hysteresis loop (0 turns it off).
+    temperature_coeff
+        Relative change of all ripple amplitudes per kelvin above 25 degC [1/K].
+    drift
+        How far the joint drifted since calibration under the ``aged`` condition, in
+        multiples of the documented estimate (:mod:`rippleb.simulator.conditions`): the
+        ripple amplitude, ripple phase and bridge zero changes of each device are scaled
+        by it (0: no drift, 1: the estimate). No effect under other conditions.
+    """
+
+    output_scale: float = 1.0
+    hysteresis_nm: float = HYSTERESIS_NM
+    temperature_coeff: float = RIPPLE_TEMP_COEFF
+    drift: float = 1.0
+
+    def temperature_scale(self, temperature_c: float) -> float:
+        """Factor on every ripple amplitude at ``temperature_c``."""
+        return 1.0 + self.temperature_coeff * (temperature_c - REFERENCE_TEMPERATURE_C)
 
 
 @dataclass(frozen=True)
@@ -143,7 +180,7 @@ class Scenario:
         Faulty sensors (:class:`Faults`); none by default.
     ripple
         Output-locked ripple, hysteresis and the ripple's temperature coefficient
-        (:class:`~rippleb.drive_ripple.RippleSettings`); the documented defaults.
+        (:class:`RippleSettings`); the documented defaults.
     """
 
     name: str
@@ -176,7 +213,7 @@ class Scenario:
         InputError
             ``<file>: trajectory: <joint> travels over [lo, hi] rad, outside its limits``.
         """
-        from rippleb import robot as arm
+        from rippleb.simulator import robot as arm
 
         model = arm.load_model(self.robot)
         idx = model.joints[model.getJointId(self.joint)].idx_q
@@ -360,7 +397,7 @@ class _Parser:
         return spec
 
     def robot(self, raw):
-        from rippleb import robot as arm
+        from rippleb.simulator import robot as arm
 
         values = self.table(raw, _ROBOT_KEYS, "robot")
         name = values.get("name", DEFAULT_ROBOT)
@@ -452,7 +489,8 @@ class _Parser:
         ranges = {"output_scale": (0.0, 10.0, "in [0, 10]"),
                   "hysteresis_nm": (0.0, 0.2 * spec.rated_torque,
                                     f"in [0, 0.2 x rated_torque = {0.2 * spec.rated_torque:g}] Nm"),
-                  "temperature_coeff": (-0.01, 0.01, "in [-0.01, 0.01] per K")}
+                  "temperature_coeff": (-0.01, 0.01, "in [-0.01, 0.01] per K"),
+                  "drift": (0.0, 5.0, "in [0, 5] (multiples of the documented drift)")}
         for key, value in values.items():
             lo, hi, what = ranges[key]
             if not lo <= value <= hi:

@@ -78,7 +78,7 @@ def ok_rows(frame):
 def with_condition(frame):
     """``frame`` with a ``condition`` column: rows of a run made before conditions existed
     were all scored in the calibration session, i.e. ``same-session``."""
-    from rippleb.conditions import DEFAULT_CONDITION
+    from rippleb.simulator.conditions import DEFAULT_CONDITION
 
     if "condition" in frame:
         return frame.assign(condition=frame["condition"].fillna(DEFAULT_CONDITION).astype(str))
@@ -129,9 +129,9 @@ def scenario_order(names) -> list[str]:
 
 
 def condition_order(names) -> list[str]:
-    """The conditions in the order of :data:`rippleb.conditions.CONDITIONS` (least to most
+    """The conditions in the order of :data:`rippleb.simulator.conditions.CONDITIONS` (least to most
     changed since calibration), then any unknown name alphabetically."""
-    from rippleb.conditions import CONDITIONS
+    from rippleb.simulator.conditions import CONDITIONS
 
     names = set(names)
     return [c for c in CONDITIONS if c in names] + sorted(names - set(CONDITIONS))

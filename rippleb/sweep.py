@@ -79,7 +79,14 @@ PARAMS = {p.name: p for p in (
           "harmonic-drive reduction (size-25 catalogue ratios 30-160; default 100)"),
     Param("temperature_c", float, -10.0, 80.0,
           "lubricant temperature of the scored session [degC] (default 40)", device=False),
+    Param("ripple.drift", float, 0.0, 5.0,
+          "drift of ripple and bridge zero since calibration, x the documented estimate "
+          "(default 1); acts under --conditions aged only", device=False),
 )}
+
+#: Parameters that change only the scored session of one condition: sweeping them
+#: without it would give every grid point the same rows.
+CONDITION_OF = {"ripple.drift": "aged"}
 
 
 @dataclass(frozen=True)
@@ -199,6 +206,11 @@ def run_sweep(params, methods=None, scenarios=None, seeds=None, *, conditions=No
             check_scenario(swept)
             entries.append((swept, calibration, point))
     condition_list = select_conditions(conditions)
+    for sweep in sweeps:
+        needed = CONDITION_OF.get(sweep.name)
+        if needed and needed not in condition_list:
+            raise InputError(f"--param {sweep.name}: acts only under the {needed!r} condition; "
+                             f"add --conditions {needed} (given: {','.join(condition_list)})")
     seed_list = runner._seed_list(runner.DEFAULT_SEEDS if seeds is None else seeds, seed_start)
     config = {"methods": names, "conditions": condition_list, "seeds": seed_list,
               "scenarios": [str(Path(s).resolve()) if s.endswith(".toml") else s for s in dict.fromkeys(given)],

@@ -2,7 +2,7 @@
 
 Every cell is computed from result rows (:mod:`rippleb.stats`); the only typed numbers
 are the paper's Table I figures (:mod:`rippleb.table_one`), which are citations. Rows carry
-a deployment ``condition`` (:mod:`rippleb.conditions`); rows without one are
+a deployment ``condition`` (:mod:`rippleb.simulator.conditions`); rows without one are
 ``same-session``, and every table is given per condition.
 """
 

@@ -31,7 +31,10 @@ def _row(method, scenario, calibration, **params):
 def test_raw_has_the_simulators_full_bandwidth_and_no_step_latency(calibration):
     # the simulated bridge has no dynamics of its own: raw passes the whole sweep
     assert _row("raw", "torque-chirp", calibration)["bandwidth_hz"] == pytest.approx(80.0)
-    assert abs(_row("raw", "load-steps", calibration)["step_latency_ms"]) < 1.0
+    # The shaft torque takes some 10 ms to follow a load step on the link (the joint's own
+    # dynamics), and on that slope the ripple (0.5-1 Nm) moves raw's 50 % crossing by a few
+    # ms either way: -2.5 ms on average over the 6 steps of seed 900 (0 with a rigid joint).
+    assert abs(_row("raw", "load-steps", calibration)["step_latency_ms"]) < 5.0
 
 
 @pytest.mark.slow
@@ -40,9 +43,10 @@ def test_lowpass_bandwidth_is_its_cutoff(calibration, cutoff):
     row = _row("lowpass", "torque-chirp", calibration, cutoff_hz=cutoff)
     assert row["bandwidth_hz"] == pytest.approx(cutoff, rel=0.08)
     # half a step comes out about one low-frequency group delay, sqrt(2) / (2 pi fc), late
-    # (a little earlier: the step's faster parts pass with less delay)
+    # (a little earlier: the step's faster parts pass with less delay, and the ripple on
+    # the true torque's 10 ms rise moves the crossing by a few ms, as for raw)
     latency = _row("lowpass", "load-steps", calibration, cutoff_hz=cutoff)["step_latency_ms"]
-    assert 0.7 < latency / (1000 * np.sqrt(2) / (2 * np.pi * cutoff)) < 1.0
+    assert 0.5 < latency / (1000 * np.sqrt(2) / (2 * np.pi * cutoff)) < 1.0
 
 
 def test_truth_carries_the_scenarios_events():

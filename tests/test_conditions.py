@@ -10,40 +10,43 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rippleb import InputError, simulate
-from rippleb.conditions import (AGED_AMPLITUDE_SIGMA, AGED_PHASE_SIGMA, AGED_ZERO_SIGMA, CONDITIONS,
+from rippleb.simulator.conditions import (AGED_AMPLITUDE_SIGMA, AGED_PHASE_SIGMA, AGED_ZERO_SIGMA, CONDITIONS,
                                 POWER_CYCLE_COOLING_K, aged, index_count, index_pulses, re_assembled)
-from rippleb.drive_ripple import RippleSettings
 from rippleb.metrics import Truth, score
 from rippleb.scenario import load_scenario, scenario_from_dict
 from rippleb.simulator import Device
 from rippleb.streaming import prepare_blocks, stream
 
-# sha256 of each column of today's logs, computed on main at 9ffeb4f (before the
-# conditions were simulated): same-session must reproduce them bit for bit.
+# sha256 of each column of the logs of the closed-loop flexible joint (docs/physics.md, "Joint
+# dynamics and position controller"), pinned when it replaced the rigid, exactly tracking
+# joint: same-session must reproduce them bit for bit.
 MAIN_HASHES = {
     ("paper-quintic", 3): {
         "t": "1beb54aa2d95e50314a2f1481fda690d01fc3abc668f318d9b58f933d630ff5a",
-        "strain": "a9fa994d92e115b0086537ce4c595e89f2f6b1c1ed5bd7581f9f242494e4aff3",
-        "encoder": "fe9843e4c274abf4d9592dbe25577e0260b42064578d78643041c608f2a87db6",
-        "current": "8dd425c24ec1971f22c4e35dbdda5ab7e2b719e88c13df188a2c680c9c9f8931",
-        "torque_true": "5aeb5698490e55420c02dde8c179b4d4effe0bb163be624f913d2194c7f6e286",
-        "torque_ref": "6c9ac048fc351df462f01aced6cb4e882dbe5b7f9062fbec25851c0d90d329f9",
+        "strain": "c7996ce9c4ad94b0865f725d78bc088c665e8fba2e75aaf23157ebbb50d6c458",
+        "encoder": "81d40ae28494328774cd5dc171538e44ac8926b4a586bc769078dfdb0356b8df",
+        "current": "f4e4380ffe1c784845ab8828218783ecb2a24ae4a14269fe95df003d636e7c60",
+        "index": "95eca79f6655379bf9e8741288b778e07d66874e2b345045530ffdba64659171",
+        "torque_true": "414f8cd0b406f84f6458b7abf519f466ab8f654a8418f31a48712ba5f83b4427",
+        "torque_ref": "cbb02548e45d57f253557ce5cd8bf9a50e6365cba54debe77cbb0cf7e8ee5922",
     },
     ("stop-restart", 0): {
         "t": "59bd44d6d9daec5059dc6a112601f1aa84bcba0fe0bb6a761815028101d8afb9",
-        "strain": "4a45b0bad9a56dfe9725f68f3eeee9a4195796e9ec935dbe6124d9302cba16e9",
-        "encoder": "e0c2d5bb318636b27511afa230f47c65cb6942e3f8582fc425083859d18088b7",
-        "current": "798e15c69f17b080eeb3c8c92960ab2f8ab22ed7675e54dfe1201d1733658c92",
-        "torque_true": "cd708f75fa775a15137390ee6c9a044d8cffb5038b42268ee338c59a7271becc",
-        "torque_ref": "eb76272712d43ebc4e150a940d8809986e2b1c505eb4cb5f8514f2c193ffe431",
+        "strain": "647c460284d6624edf564564308d04673f857e6587e5b373ce3a22ba607d376b",
+        "encoder": "bb190cd154fe212f758a0f48e1a963e20f32a38ef50f12f57cf1b90bde932300",
+        "current": "098d5ec08cb90264c88110c48f2df0110436600a8d84338a94eaf13fbd53114c",
+        "index": "8ca43e0db91458e6e92c93c925d718339f65480962d99e28158bc05cc223560e",
+        "torque_true": "b3de7e615178bf76fea6fbf5a9969ae195344ece28bd05a95145bde65a3a2917",
+        "torque_ref": "b8d71c9c44e2e774c31d8edbd6a51bc06dd7dd84a5227e178aeeb6f4c73a5fe4",
     },
     ("creep", 7): {
         "t": "edf1135aadf6ebdec6ca763899e10a497a4ac89fdeb0021bb3eb95b8c924e6f0",
-        "strain": "3761a02728cfa34acde81c818ee15441dd40599f8238c065a89f7dbe7a2d5876",
-        "encoder": "fdd32a266f60ef37fcc6b54cca50b805b776f2af939c5951ab48d4de4711e3fd",
-        "current": "53422a1f743dc091007df6527039b0d65f370c7b95e2b423b0dd459e46b4f9f2",
-        "torque_true": "fd060579b186c1490f260718d85073c538cfbe0e1e62e0a4c99799ac87dc4511",
-        "torque_ref": "2b2a74d1fdc018b14a6f203bc5a0abcc3a446a55cfe6c02e43d133ab2302a4a0",
+        "strain": "dd22a5c0969a96d39114ee1e91dde74ffba6229833e7109c6484c54b3f351501",
+        "encoder": "e857349cb5d3d926c0696414665f3928a0403839ab4bffef4ac0a6e3752e0570",
+        "current": "9dcf6532b3a96e7f06cd523eb75a54781d463328bd6af45b4515f6b0f0f661c6",
+        "index": "4d21763ca4583b59cc8f8f37341fab073dd3a21bc394c8c8db047f881d03f575",
+        "torque_true": "8fe6c4f51f579c4bd989d234806995646b3ed689781c95f035f086654a86e7e4",
+        "torque_ref": "c5c5777470ddee31ff3ac84e5aad5f624d5288f636f0e08202e12d56abb648e8",
     },
 }
 
@@ -61,29 +64,15 @@ CRUISE = scenario_from_dict({
 }, name="cruise")
 
 
-#: ``torque_ref`` is left out of the pinned columns on purpose: it moved since with the
-#: nominal model of eq. (7) (docs/physics.md), which is no condition's doing; ``index`` is new.
-PINNED = ("t", "strain", "encoder", "current", "torque_true")
-
-
 def column_hashes(log) -> dict:
     return {name: hashlib.sha256(np.ascontiguousarray(values).tobytes()).hexdigest()
-            for name, values in log.columns().items() if name in PINNED}
-
-
-def without_drive_ripple(name):
-    """The scenario without the output-locked ripple and hysteresis added since (both are
-    physics of every condition, not of a condition), i.e. the physics the hashes pin."""
-    return dataclasses.replace(load_scenario(name), ripple=RippleSettings(output_scale=0.0,
-                                                                          hysteresis_nm=0.0))
+            for name, values in log.columns().items()}
 
 
 def test_same_session_reproduces_todays_logs_bit_for_bit():
     for (scenario, seed), hashes in MAIN_HASHES.items():
-        expected = {name: hashes[name] for name in PINNED}
-        sc = without_drive_ripple(scenario)
-        assert column_hashes(simulate(sc, seed).log) == expected
-        assert column_hashes(simulate(sc, seed, "same-session").log) == expected
+        assert column_hashes(simulate(scenario, seed).log) == hashes
+        assert column_hashes(simulate(scenario, seed, "same-session").log) == hashes
 
 
 def test_same_session_is_the_default_condition():
@@ -196,7 +185,7 @@ def ripple_from_log(sim) -> tuple[np.ndarray, np.ndarray, float]:
     mean load, so the constant terms are the ripple at that load. Returns the amplitudes,
     phases and the mean load [Nm].
     """
-    moving = np.abs(sim.joint_velocity - 0.3) < 1e-9
+    moving = np.abs(sim.scenario.trajectory(sim.log.t)[1] - 0.3) < 1e-9   # commanded cruise
     theta, tau = sim.wave_angle[moving], sim.log.torque_true[moving]
     mean = float(np.mean(tau))
     columns = [tau, np.ones_like(tau), sim.log.t[moving]]
@@ -301,7 +290,9 @@ def test_kalman_ripple_re_homes_on_the_index_after_a_power_cycle():
     cycled = simulate("paper-quintic", seed, "power-cycled")
     homed, _ = _rms(method, None, cycled)
     blind, _ = _rms(method, None, cycled, keep_index=False)
-    assert homed < 0.8 * blind
+    # 0.74 with the rigid joint; the closed-loop joint's own torque dynamics add error that
+    # no ripple map removes (homed 1.08 -> 1.21 Nm, blind 1.47 unchanged): 0.82 now
+    assert homed < 0.88 * blind
     # in the calibration session's power-on, re-homing changes nothing
     same = simulate("paper-quintic", seed)
     _, est_a = _rms(method, None, same)
@@ -315,7 +306,7 @@ def test_dropouts_lose_index_pulses_instead_of_repeating_them():
         "trajectory": {"start": -2.0, "segment": [
             {"kind": "ramp", "velocity": 0.3, "duration": 0.2},
             {"kind": "cruise", "duration": 1.0}]},
-        "faults": {"dropout_rate": 200.0, "dropout_length": 0.004},
+        "faults": {"dropout_rate": 100.0, "dropout_length": 0.004},
     }, name="cruise")
     healthy, broken = simulate(CRUISE, 6).log, simulate(faulty, 6).log
     filled = np.concatenate(([False], np.diff(broken.t) > 0)) & np.concatenate(
@@ -362,3 +353,26 @@ def test_index_homing_recovers_the_calibration_frame(shift, steps, mark):
         assert np.all(np.minimum(frame, n - frame) <= 1)
     else:
         assert np.array_equal(out, logged)
+
+
+@pytest.mark.parametrize("seed", [0, 5])
+def test_aged_drift_scales_along_one_direction_per_device(seed):
+    """``[ripple] drift`` multiplies the aged changes; the drawn direction stays the device's."""
+    device = Device.from_seed(seed)
+    unit, double, none = aged(device, 1.0), aged(device, 2.0), aged(device, 0.0)
+    assert none == device
+    log_ratio = lambda d: np.log(np.asarray(d.ripple_base) / device.ripple_base)  # noqa: E731
+    np.testing.assert_allclose(log_ratio(double), 2 * log_ratio(unit), rtol=1e-9)
+    np.testing.assert_allclose(np.subtract(double.ripple_phase, device.ripple_phase),
+                               2 * np.subtract(unit.ripple_phase, device.ripple_phase), rtol=1e-9)
+    assert double.offset - device.offset == pytest.approx(2 * (unit.offset - device.offset), rel=1e-9)
+
+
+def test_scenario_drift_reaches_the_aged_log_only():
+    base = load_scenario("paper-quintic")
+    still = dataclasses.replace(base, ripple=dataclasses.replace(base.ripple, drift=0.0))
+    assert base.ripple.drift == 1.0
+    same = simulate(base, 2, "same-session").log
+    np.testing.assert_array_equal(simulate(still, 2, "aged").log.strain, same.strain)
+    assert not np.array_equal(simulate(base, 2, "aged").log.strain, same.strain)
+    np.testing.assert_array_equal(simulate(still, 2, "same-session").log.strain, same.strain)

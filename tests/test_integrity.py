@@ -303,3 +303,45 @@ def test_no_process_outlives_its_row(tmp_path, monkeypatch, namespaces, register
     assert list(frame.status) == ["ok"], frame.message.tolist()
     time.sleep(0.3)
     assert _spawned() == []
+
+
+def _signals_its_group_and_parent():
+    for action in (lambda: os.killpg(0, signal.SIGTERM), lambda: os.kill(os.getppid(), signal.SIGKILL)):
+        try:
+            action()
+        except OSError:
+            pass
+    time.sleep(0.3)  # the keeper, had it been hit, is gone by now
+    return b"reported"
+
+
+def _signals_its_group():
+    os.killpg(0, signal.SIGTERM)
+    time.sleep(0.3)
+    return b"reported"
+
+
+@pytest.mark.parametrize("namespaces", [True, False], ids=["pid-namespace", "subreaper-only"])
+def test_a_job_that_signals_its_group_cannot_kill_its_keeper(monkeypatch, namespaces):
+    """The worker has its own process group: killpg(0) reaches only the worker and its
+    children, never the keeper that reports how the job ended. In a PID namespace the
+    worker is its init and survives its own signals (kill(getppid()) is kill(0) there), so
+    the job reports; without one the worker ends itself, and the keeper lives to report the
+    signal (before, it died with it, and the row's cause was lost or, when the worker was
+    still fast enough, the row was saved by luck)."""
+    from rippleb import isolation
+    from rippleb.pool import Pool
+
+    if not namespaces:
+        monkeypatch.setattr(isolation, "new_pid_namespace", lambda: False)
+    job = _signals_its_group_and_parent if namespaces else _signals_its_group
+    expected = ("done", b"reported") if namespaces else ("died", -signal.SIGTERM)
+    outcomes = []
+    for key in range(5):
+        pool = Pool(1)
+        pool.submit(key, job, timeout=60)
+        finished = []
+        while not finished:
+            finished = pool.wait()
+        outcomes.append((finished[0].kind, finished[0].value))
+    assert outcomes == [expected] * 5

@@ -100,11 +100,11 @@ def test_conditions_axis_calibration_always_same_session(fake, tmp_path, monkeyp
         return fake_simulate(scenario, seed, condition)
     monkeypatch.setattr(rippleb.simulator, "simulate", recording)
     frame = rippleb.run(methods="raw", scenarios="paper-quintic", seeds=1, conditions="all", out=tmp_path / "o")
-    assert list(frame.condition) == sorted(rippleb.conditions.CONDITIONS) and (frame.status == "ok").all()
+    assert list(frame.condition) == sorted(rippleb.CONDITIONS) and (frame.status == "ok").all()
     lines = set(calls.read_text().splitlines())
-    assert lines == {"calibration 0 same-session"} | {f"paper-quintic 0 {c}" for c in rippleb.conditions.CONDITIONS}
+    assert lines == {"calibration 0 same-session"} | {f"paper-quintic 0 {c}" for c in rippleb.CONDITIONS}
     import json
-    assert json.loads((tmp_path / "o" / "run.json").read_text())["conditions"] == list(rippleb.conditions.CONDITIONS)
+    assert json.loads((tmp_path / "o" / "run.json").read_text())["conditions"] == list(rippleb.CONDITIONS)
 
 
 def test_default_condition_is_same_session_and_unknown_ones_are_refused(fake):

@@ -92,15 +92,19 @@ def test_ripple_is_a_constant_offset_at_rest_and_continues_after_restart():
     sim = simulate(sc, 3)
     dev, log = sim.device, sim.log
     ripple = dev.ripple(sim.wave_angle, log.torque_true)
-    rest = (log.t > 0.55) & (log.t < 0.95)
-    assert np.ptp(ripple[rest]) < 1e-6
+    # The closed loop settles in about 4 / (zeta w_c) after the stop (docs/physics.md,
+    # "Joint dynamics and position controller"); then the motor creeps by a count or two
+    # against its friction while the PD trims the last position error.
+    rest = (log.t > 0.8) & (log.t < 0.99)
+    assert np.ptp(log.encoder[rest]) <= 3
+    assert np.ptp(ripple[rest]) < 0.05
     assert abs(ripple[rest].mean()) > 1e-3          # a real offset, not zero
     # The strain at rest is the torque plus that frozen ripple, up to noise and drift.
     gap = log.strain[rest] / dev.gain - log.torque_true[rest] - ripple[rest]
     assert np.std(gap) < 0.03
     # After the restart the ripple starts from the stop's value: same angle, same load.
     moving_again = np.flatnonzero(log.t >= 1.0)[0]
-    assert ripple[moving_again] == pytest.approx(ripple[rest][-1], abs=1e-6)
+    assert ripple[moving_again] == pytest.approx(ripple[rest][-1], abs=0.02)
     assert np.ptp(ripple[moving_again:]) > 0.3
 
 
@@ -143,7 +147,7 @@ def test_current_carries_the_load_through_the_gear():
 def test_load_table_matches_rnea():
     import pinocchio as pin
 
-    from rippleb import robot
+    from rippleb.simulator import robot
 
     table = robot.load_table("ur5", "shoulder_lift_joint", {"elbow_joint": 1.5}, (-2.2, -0.9))
     model = robot.load_model("ur5")

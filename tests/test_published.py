@@ -15,7 +15,7 @@ import pytest
 
 import rippleb
 from rippleb import report
-from rippleb.conditions import CONDITIONS
+from rippleb.simulator.conditions import CONDITIONS
 from rippleb.registry import Registry
 from rippleb.scenario import scored_scenarios
 

@@ -4,8 +4,9 @@ model whose link masses and inertias are off by the documented spread."""
 import numpy as np
 import pytest
 
-from rippleb import robot, simulate
-from rippleb.simulator import _load_table
+from rippleb import simulate
+from rippleb.simulator import robot
+from rippleb.simulator.joint import load_table as _load_table
 
 SEEDS = range(900, 910)
 
@@ -41,22 +42,27 @@ def test_reference_is_eq7_of_the_desired_trajectory_with_the_nominal_model(monke
     monkeypatch.setattr(robot, "NOMINAL_INERTIA_SPREAD", 0.0)
     exact = simulate("paper-quintic", 900)
     assert np.allclose(exact.log.torque_ref, _load_table(sim.scenario, q).model_torque(q, qdd), atol=1e-9)
-    assert np.array_equal(exact.log.torque_true, sim.log.torque_true)
+    # the true torque feels the nominal model only through the controller's feedforward,
+    # which the position loop partly corrects: less than the reference moves
+    rms = lambda x: np.sqrt(np.mean(x**2))  # noqa: E731
+    moved = rms(exact.log.torque_ref - sim.log.torque_ref)
+    assert 0 < rms(exact.log.torque_true - sim.log.torque_true) < moved
 
 
 @pytest.mark.slow
 def test_reference_error_on_paper_quintic_has_the_documented_size():
-    # docs/physics.md, "Nominal model of eq. (7)": seeds 900-909, RMS 0.41-1.22 Nm (mean
-    # 0.61), max up to 1.79 Nm; with the exact model it was RMS 0.34-0.70 (mean 0.51)
+    # docs/physics.md, "Nominal model of eq. (7)": seeds 900-909 with the closed-loop joint,
+    # RMS 0.56-1.33 Nm (mean 0.76), max up to 3.09 Nm; with the rigid, exactly tracking
+    # joint it was RMS 0.41-1.22 (mean 0.61), max 1.79
     rms, peak = [], []
     for seed in SEEDS:
         sim = simulate("paper-quintic", seed)
         diff = (sim.log.torque_ref - sim.log.torque_true)[sim.eval_mask]
         rms.append(np.sqrt(np.mean(diff ** 2)))
         peak.append(np.abs(diff).max())
-    assert np.mean(rms) == pytest.approx(0.61, abs=0.01)
-    assert min(rms) == pytest.approx(0.41, abs=0.01) and max(rms) == pytest.approx(1.22, abs=0.01)
-    assert max(peak) == pytest.approx(1.79, abs=0.01)
+    assert np.mean(rms) == pytest.approx(0.762, abs=0.01)
+    assert min(rms) == pytest.approx(0.560, abs=0.01) and max(rms) == pytest.approx(1.333, abs=0.01)
+    assert max(peak) == pytest.approx(3.088, abs=0.01)
 
 
 def test_reference_model_error_matches_the_spread_it_comes_from():

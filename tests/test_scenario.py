@@ -174,7 +174,7 @@ def test_step_edges_are_the_on_and_off_edges_of_step_loads():
 
 
 def test_ripple_table_sets_the_drive_ripple_and_defaults_are_documented():
-    from rippleb.drive_ripple import HYSTERESIS_NM, RippleSettings
+    from rippleb.scenario import HYSTERESIS_NM, RippleSettings
 
     assert load_scenario("paper-quintic").ripple == RippleSettings()
     assert RippleSettings().hysteresis_nm == HYSTERESIS_NM and RippleSettings().output_scale == 1.0

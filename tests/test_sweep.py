@@ -56,3 +56,18 @@ def test_an_impossible_combination_names_the_swept_values():
 def test_every_parameter_has_a_range_and_a_description():
     for param in PARAMS.values():
         assert param.low < param.high and param.doc
+
+
+def test_ripple_drift_is_swept_into_the_ripple_table():
+    sc = swept_scenario("paper-quintic", {"ripple.drift": 2.5})
+    assert sc.ripple.drift == 2.5 and not PARAMS["ripple.drift"].device
+    with pytest.raises(InputError, match=r"ripple\.drift.*in \[0, 5\]"):
+        swept_scenario("paper-quintic", {"ripple.drift": 6.0})
+
+
+def test_ripple_drift_without_the_aged_condition_is_refused():
+    from rippleb.sweep import run_sweep
+
+    with pytest.raises(InputError, match=r"ripple\.drift: acts only under the 'aged' condition"):
+        run_sweep(["ripple.drift=0,1"], methods="raw", scenarios="paper-quintic", seeds=1,
+                  conditions="same-session")

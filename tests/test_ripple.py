@@ -6,8 +6,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rippleb import simulate
-from rippleb.drive_ripple import (HYSTERESIS_NM, OutputRipple, RippleSettings, _hysteresis_reference,
-                                  bridge_ripple, hysteresis)
+from rippleb.scenario import HYSTERESIS_NM, RippleSettings
+from rippleb.simulator.ripple import (OutputRipple, _hysteresis_reference,
+                                    bridge_ripple, hysteresis)
 from rippleb.scenario import scenario_from_dict
 
 LOAD_NM = 20.0

@@ -14,39 +14,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rippleb.scenario import RippleSettings
+
 #: Orders of the output (circular-spline) angle and their nominal amplitudes
 #: ``(order, base [Nm], per Nm of |tau|)``. **Estimate**, see docs/physics.md.
 OUTPUT_ORDERS = ((1, 0.15, 0.004), (2, 0.10, 0.003))
 OUTPUT_SPREAD = 0.25              # log-normal sigma of the device-to-device amplitude spread
-#: Loop width of the strain hysteresis [Nm] (1 % of the 51 Nm rating). **Estimate**.
-HYSTERESIS_NM = 0.5
-#: Relative change of every ripple amplitude per kelvin from 25 degC. Off: no source.
-RIPPLE_TEMP_COEFF = 0.0
-REFERENCE_TEMPERATURE_C = 25.0
 _SALT = int.from_bytes(hashlib.sha256(b"drive-ripple").digest()[:8], "little")
-
-
-@dataclass(frozen=True)
-class RippleSettings:
-    """What a scenario's ``[ripple]`` table sets (all optional).
-
-    Attributes
-    ----------
-    output_scale
-        Multiplies the output-locked ripple amplitudes (0 turns it off).
-    hysteresis_nm
-        Width [Nm] of the strain hysteresis loop (0 turns it off).
-    temperature_coeff
-        Relative change of all ripple amplitudes per kelvin above 25 degC [1/K].
-    """
-
-    output_scale: float = 1.0
-    hysteresis_nm: float = HYSTERESIS_NM
-    temperature_coeff: float = RIPPLE_TEMP_COEFF
-
-    def temperature_scale(self, temperature_c: float) -> float:
-        """Factor on every ripple amplitude at ``temperature_c``."""
-        return 1.0 + self.temperature_coeff * (temperature_c - REFERENCE_TEMPERATURE_C)
 
 
 @dataclass(frozen=True)

@@ -106,27 +106,29 @@ def session(device, scenario, condition: str) -> Session:
         return Session(device=device, temperature_c=scenario.temperature_c - cooling,
                        counter_start=start)
     if condition == "aged":
-        return dataclasses.replace(same, device=aged(device))
+        return dataclasses.replace(same, device=aged(device, scenario.ripple.drift))
     return dataclasses.replace(same, device=re_assembled(device))
 
 
-def aged(device):
+def aged(device, drift: float = 1.0):
     """``device`` after months of service: each ripple order's amplitude scaled by
-    ``exp(AGED_AMPLITUDE_SIGMA n)``, its phase moved by ``AGED_PHASE_SIGMA n`` and the
-    bridge zero moved by ``AGED_ZERO_SIGMA n`` [V], ``n ~ N(0, 1)`` each.
+    ``exp(drift AGED_AMPLITUDE_SIGMA n)``, its phase moved by ``drift AGED_PHASE_SIGMA n``
+    and the bridge zero moved by ``drift AGED_ZERO_SIGMA n`` [V], ``n ~ N(0, 1)`` each.
 
-    One draw per device: every scored scenario of a seed sees the same aged joint.
+    One draw per device: every scored scenario of a seed sees the same aged joint. The
+    draws ``n`` do not depend on ``drift`` (the scenario's ``[ripple] drift``), so a sweep
+    of it moves each device further along one direction of drift.
     """
     rng = stream(device.seed, "aged")
     k = len(device.ripple_orders)
-    ratio = np.exp(AGED_AMPLITUDE_SIGMA * rng.standard_normal(k))
-    phase = AGED_PHASE_SIGMA * rng.standard_normal(k)
+    ratio = np.exp(drift * AGED_AMPLITUDE_SIGMA * rng.standard_normal(k))
+    phase = drift * AGED_PHASE_SIGMA * rng.standard_normal(k)
     return dataclasses.replace(
         device,
         ripple_base=tuple(np.asarray(device.ripple_base) * ratio),
         ripple_load=tuple(np.asarray(device.ripple_load) * ratio),
         ripple_phase=tuple(np.asarray(device.ripple_phase) + phase),
-        offset=device.offset + AGED_ZERO_SIGMA * rng.standard_normal(),
+        offset=device.offset + drift * AGED_ZERO_SIGMA * rng.standard_normal(),
     )
 
 

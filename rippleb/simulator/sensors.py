@@ -1,0 +1,98 @@
+"""Sensors and DAQ: the strain bridge, the motor-current sense, the encoder counter, ADCs
+and the faults a scenario may switch on.
+
+Each sensor turns a true signal of the simulated joint into what the DAQ records; the
+measurement noise comes from the log's own generator. Sources in ``docs/physics.md``
+("Strain bridge", "DAQ").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rippleb.scenario import REFERENCE_TEMPERATURE_C, Scenario
+from rippleb.simulator.device import Device
+from rippleb.simulator.ripple import bridge_ripple
+
+# --- strain bridge and DAQ (docs/physics.md, "Strain bridge", "DAQ") ---
+STRAIN_GAIN = 0.1            # V/Nm after the bridge amplifier; estimate, rated 51 Nm -> 5.1 V
+STRAIN_RANGE = 10.0          # +-V of the strain ADC
+STRAIN_BITS = 16
+STRAIN_NOISE = 1.0e-3        # V RMS, amplifier + ADC noise at 20 kHz bandwidth; estimate
+CURRENT_RANGE = 20.0         # +-A of the current ADC
+CURRENT_BITS = 12
+CURRENT_NOISE = 0.03         # A RMS, current-sense noise; estimate
+
+
+def quantise(values: np.ndarray, full_scale: float, bits: int) -> np.ndarray:
+    """An ADC of ``+-full_scale`` and ``bits`` bits: round to a step, saturate at the rails."""
+    step = 2.0 * full_scale / 2**bits
+    codes = np.clip(np.round(values / step), -(2 ** (bits - 1)), 2 ** (bits - 1) - 1)
+    return codes * step
+
+
+def strain_bridge(device: Device, sc: Scenario, t, theta_m, tau, noise, output_angle) -> np.ndarray:
+    """Bridge voltage (paper eq. 3-5): gain x (torque + ripple) + zero + drift + noise, ADC.
+
+    The ripple is the wave-generator ripple plus the output-locked ripple and hysteresis
+    of :func:`rippleb.simulator.ripple.bridge_ripple`.
+    """
+    zero = device.offset + device.offset_temp_coeff * (sc.temperature_c - REFERENCE_TEMPERATURE_C)
+    ripple = bridge_ripple(sc.ripple, device.seed, sc.temperature_c, device.ripple(theta_m, tau),
+                           output_angle, tau)
+    volts = (device.gain * (tau + ripple) + zero + device.drift_rate * t
+             + STRAIN_NOISE * noise.standard_normal(len(t)))
+    if sc.faults.bridge_drift:   # fault: extra bridge zero drift [V/s]
+        volts = volts + sc.faults.bridge_drift * t
+    # fault: a lower full scale (amplifier gain set too high) clips the peaks
+    return quantise(volts, sc.faults.strain_full_scale or STRAIN_RANGE, STRAIN_BITS)
+
+
+def current_sense(sc: Scenario, commanded: np.ndarray, offset: float, noise) -> np.ndarray:
+    """Motor current [A]: the commanded current (the current loop is ideal) + the
+    sense's offset + noise, through the ADC."""
+    amps = commanded + offset + CURRENT_NOISE * noise.standard_normal(len(commanded))
+    if sc.faults.current_offset:   # fault: shifted current-sense zero [A]
+        amps = amps + sc.faults.current_offset
+    return quantise(amps, CURRENT_RANGE, CURRENT_BITS)
+
+
+def encoder_faults(encoder: np.ndarray, faults, fs: float, rng) -> np.ndarray:
+    """Missed and spurious counts of an incremental encoder counter.
+
+    Each true count is lost with probability ``encoder_missed``; spurious counts of +-1
+    arrive as a Poisson process of ``encoder_spurious_rate`` per second. A counter never
+    learns of either, so both accumulate into a lasting position error.
+    """
+    steps = np.diff(encoder)
+    if faults.encoder_missed:
+        lost = rng.binomial(np.abs(steps), faults.encoder_missed)
+        steps = steps - np.sign(steps) * lost
+    if faults.encoder_spurious_rate:
+        k = rng.poisson(faults.encoder_spurious_rate / fs, len(steps))
+        steps = steps + (2 * rng.binomial(k, 0.5) - k)   # sum of k random +-1
+    return encoder[0] + np.concatenate(([0], np.cumsum(steps))).astype(np.int64)
+
+
+def dropouts(channels, faults, fs: float, rng):
+    """DAQ dropouts: lost frames filled with the last good sample of every channel.
+
+    Dropouts start as a Poisson process of ``dropout_rate`` per second and last
+    ``dropout_length`` seconds (at least one sample). The first sample is always good.
+    The last channel is the index pulse: an event, not a level, so a filled frame
+    carries 0 (a pulse inside a lost frame is lost with it, repeating it would invent
+    passes of the index mark).
+    """
+    if not faults.dropout_rate:
+        return channels
+    n = len(channels[0])
+    length = max(1, int(round(faults.dropout_length * fs)))
+    starts = (rng.random(n) < faults.dropout_rate / fs).astype(np.int64)
+    count = np.cumsum(starts)
+    before = np.concatenate((np.zeros(length, dtype=np.int64), count[:-length]))[:n]
+    dropped = (count - before) > 0
+    dropped[0] = False
+    index = np.arange(n)
+    last_good = np.maximum.accumulate(np.where(dropped, 0, index))
+    *levels, pulses = channels
+    return (*(channel[last_good] for channel in levels), np.where(dropped, 0, pulses).astype(np.int8))

@@ -1,0 +1,136 @@
+"""One simulated run: ``simulate(scenario, seed, condition)`` puts the parts together.
+
+``simulate(scenario, seed)`` integrates the closed-loop flexible joint on the DAQ grid
+``t = k / fs`` (:mod:`rippleb.simulator.controller`, :mod:`rippleb.simulator.joint`): the
+motor under a position controller that follows the scenario's trajectory drives the
+link through the drive's compliance, so the joint angle, the shaft torque, the motor angle
+and the current are simulated, not prescribed. The sensors then read that motion. The
+device (the hidden truth of one joint: gauge errors, ripple, friction, offsets) comes
+from ``Device.from_seed(seed)``; the measurement noise comes from a second generator
+seeded by ``(seed, scenario name)``, so the calibration log and an evaluation log of one
+seed share the device but not the noise.
+
+Every default value of the parts is listed with its source in ``docs/physics.md``.
+
+Sign conventions
+----------------
+Positive joint torque ``tau`` drives the joint in the positive ``q`` direction. The motor
+angle is counted so that ``theta_m = N (q + twist(tau))`` (the gear's sign inversion is
+folded into the encoder's counting direction). The motor's current accelerates its rotor
+against ``tau / N``, the friction opposing the motor velocity, and cogging.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from rippleb.data import JointSpec, SensorLog
+from rippleb.scenario import Scenario, load_scenario
+from rippleb.simulator import conditions, controller
+from rippleb.simulator.conditions import DEFAULT_CONDITION, check_condition, stable_hash
+from rippleb.simulator.device import Device, check_seed
+from rippleb.simulator.joint import load_table
+from rippleb.simulator.sensors import current_sense, dropouts, encoder_faults, strain_bridge
+
+
+@dataclass(frozen=True, eq=False)
+class Simulation:
+    """One simulated run: the log plus the truth the runner and metrics need.
+
+    Attributes
+    ----------
+    log
+        :class:`~rippleb.data.SensorLog` with all seven columns;
+        ``meta = {"scenario": name, "seed": seed, "condition": condition}``; the log also
+        has the ``index`` column (encoder index pulse).
+    moving
+        Per sample: the commanded joint velocity is non-zero.
+    wave_angle
+        True wave-generator (= motor) angle [rad].
+    joint_velocity
+        True joint velocity [rad/s].
+    eval_mask
+        Per sample: inside the scenario's evaluation window.
+    scenario, device
+        What was simulated.
+    """
+
+    log: SensorLog
+    moving: np.ndarray
+    wave_angle: np.ndarray
+    joint_velocity: np.ndarray
+    eval_mask: np.ndarray
+    scenario: Scenario
+    device: Device
+
+
+def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_CONDITION) -> Simulation:
+    """Simulate ``scenario`` (object, built-in name or TOML path) on the device of ``seed``.
+
+    ``condition`` (see :mod:`rippleb.conditions`) says what happened to the device since
+    its calibration session; ``same-session`` is the device as calibrated. A scenario with
+    ``scored = false`` (``calibration``) is that calibration session, the same under
+    every condition.
+    """
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    seed = check_seed(seed)
+    condition = check_condition(condition)
+    spec: JointSpec = sc.spec
+    session = conditions.session(Device.from_seed(seed), sc, condition)
+    device = session.device
+    if session.temperature_c != sc.temperature_c:
+        sc = dataclasses.replace(sc, temperature_c=session.temperature_c)
+    noise = np.random.default_rng(np.random.SeedSequence([seed, stable_hash(sc.name)]))
+
+    n = max(2, int(round(sc.duration * spec.fs)))
+    t = np.arange(n) / spec.fs
+    trajectory = sc.trajectory(t)
+    q_d, qd_d = trajectory[0], trajectory[1]
+    # eq. (7) as a controller computes it: desired trajectory, nominal (identified) model
+    nominal = load_table(sc, q_d, nominal_seed=seed)
+    tau_ref = nominal.model_torque(q_d, trajectory[2]) + sc.external_torque(t, known_only=True)
+    gains = controller.design_gains(spec, float(np.mean(nominal.inertia)))
+    state = controller.run(spec, device, sc.temperature_c, load_table(sc, q_d), gains, t, trajectory,
+                           tau_ref - _excitation(sc, t), sc.external_torque(t))
+    q, qd, theta_m, _, tau_true, commanded = state
+
+    strain = strain_bridge(device, sc, t, theta_m, tau_true, noise, output_angle=q)
+    current = current_sense(sc, commanded, device.current_offset, noise)
+    absolute = np.floor(theta_m / (2 * np.pi) * spec.counts_per_rev).astype(np.int64)
+    index = conditions.index_pulses(absolute, conditions.index_count(seed, spec.counts_per_rev),
+                                    spec.counts_per_rev)
+    # An incremental counter counts from wherever it stood when the log started.
+    encoder = absolute if session.counter_start is None else absolute - absolute[0] + session.counter_start
+    # the calibration session is the first session whatever the condition asked for
+    meta = {"scenario": sc.name, "seed": seed, "condition": condition if sc.scored else DEFAULT_CONDITION}
+    if sc.faults.active:
+        # Own generator: a faulty scenario's healthy signals stay those of the same
+        # scenario without faults, and scenarios without faults are untouched.
+        fault_rng = np.random.default_rng(
+            np.random.SeedSequence([seed, stable_hash(sc.name), stable_hash("faults")]))
+        encoder = encoder_faults(encoder, sc.faults, spec.fs, fault_rng)
+        strain, encoder, current, index = dropouts((strain, encoder, current, index), sc.faults,
+                                                    spec.fs, fault_rng)
+        meta["faults"] = {k: v for k, v in dataclasses.asdict(sc.faults).items() if v}
+
+    log = SensorLog(spec=spec, t=t, strain=strain, encoder=encoder, current=current, index=index,
+                    torque_true=tau_true, torque_ref=tau_ref, meta=meta)
+    start, stop = sc.evaluation
+    return Simulation(log=log, moving=np.abs(qd_d) > 1e-12, wave_angle=theta_m,
+                      joint_velocity=qd, eval_mask=(t >= start) & (t <= stop),
+                      scenario=sc, device=device)
+
+
+def _excitation(sc: Scenario, t: np.ndarray) -> np.ndarray:
+    """The known chirp loads: a test rig's excitation of the link. They belong to the
+    reference of eq. (7) the benchmark scores against, but not to the controller's
+    feedforward: the robot carries its payloads (known steps), a shaker acts on it from
+    outside (docs/physics.md, "Joint dynamics and position controller")."""
+    total = np.zeros_like(t)
+    for load in sc.loads:
+        if load.known and load.kind == "chirp":
+            total = total + load.evaluate(t)
+    return total

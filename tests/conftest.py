@@ -12,7 +12,6 @@ ONE_WORKER_FILES = {
     "test_bandwidth.py",      # the calibration log
     "test_dask.py",           # clusters started one test at a time
     "test_faults.py",         # fitted methods and faulty simulations
-    "test_integrity.py",      # the hostile plugins' site directory
     "test_kalman_ripple.py",  # fitted filters
     "test_order_tracking.py", # simulations and scores cached per process
     "test_plugins.py",        # the plugins installed once

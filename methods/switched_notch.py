@@ -131,30 +131,49 @@ class SwitchedNotch(Method):
 
     # -- identification --------------------------------------------------------------
     def fit(self, calibration: SensorLog) -> None:
-        """Least-squares gain and offset of the strain against the known torque."""
+        """Least-squares gain and offset of the strain against the known torque, and the
+        bank designed for the calibration's rate and tick (a device streams at the rate it
+        was calibrated at, so ``reset`` then reuses it instead of designing it per run)."""
         self.gain_, self.offset_ = fit_gain_offset(calibration.strain, calibration.torque_ref)
+        self.design_ = self._design(calibration.spec)
 
     # -- streaming -------------------------------------------------------------------
     def reset(self, spec: JointSpec) -> None:
-        """Design the bank for ``spec.fs`` and clear the streaming state."""
+        """Design the bank for ``spec.fs`` (unless ``fit`` did) and clear the streaming state."""
         super().reset(spec)
         if not hasattr(self, "gain_"):
             self.gain_, self.offset_ = 1.0, 0.0
-        n_bands = self.n_bands or bank_size(self.min_speed, self.max_speed, self.q, self.hysteresis)
-        self.centres_ = band_centres(self.min_speed, self.max_speed, n_bands)
-        bands = [band_filter(c, self.orders, self.q, spec.fs) for c in self.centres_]
-        self.n_states_ = max(b[0].shape[0] for b in bands)
-        self.bands_ = [_pad(b, self.n_states_) for b in bands]
-        self.modes_ = self.n_states_ // 2
-        self.from_modal_ = [modal_basis(b[0]) for b in self.bands_]
-        self.to_modal_ = [np.linalg.inv(v) for v in self.from_modal_]
-        self.tick_ = spec.block_size
-        self.lifted_ = {}
-        self._lifted(self.tick_)      # the runner's block length, built before the first tick
+        design = getattr(self, "design_", None)
+        if design is None or design["key"] != self._design_key(spec):
+            design = self._design(spec)
+        for name, value in design.items():
+            if name != "key":
+                setattr(self, name, value)
+        self.lifted_ = dict(self.lifted_)  # lengths met while streaming are this run's own
         self.x0_ = self.x1_ = None    # modal bank state, set by the first sample
         self.band_ = OFF
         self.phase_ = 0               # samples since the last tick boundary
         self.marks_ = []              # encoder counts at the last tick boundaries
+
+    def _design_key(self, spec: JointSpec) -> tuple:
+        return (spec.fs, spec.block_size, tuple(sorted(self.get_params().items(), key=str)))
+
+    def _design(self, spec: JointSpec) -> dict:
+        """The bank for ``spec``: centres, padded band filters, their modal bases, and the
+        lifted matrices of the runner's block length (built before the first tick)."""
+        n_bands = self.n_bands or bank_size(self.min_speed, self.max_speed, self.q, self.hysteresis)
+        centres = band_centres(self.min_speed, self.max_speed, n_bands)
+        bands = [band_filter(c, self.orders, self.q, spec.fs) for c in centres]
+        n_states = max(b[0].shape[0] for b in bands)
+        self.bands_ = [_pad(b, n_states) for b in bands]
+        self.from_modal_ = [modal_basis(b[0]) for b in self.bands_]
+        self.to_modal_ = [np.linalg.inv(v) for v in self.from_modal_]
+        self.tick_ = spec.block_size
+        self.lifted_ = {}
+        self._lifted(self.tick_)
+        return {"key": self._design_key(spec), "centres_": centres, "n_states_": n_states,
+                "bands_": self.bands_, "modes_": n_states // 2, "from_modal_": self.from_modal_,
+                "to_modal_": self.to_modal_, "tick_": self.tick_, "lifted_": self.lifted_}
 
     def step(self, block: SensorBlock) -> np.ndarray:
         """Notch the strain with the active band, segment by segment of the tick grid."""

@@ -68,6 +68,8 @@ class DaskExecutor:
         if not tasks:
             return
         with self._client() as client:
+            client.wait_for_workers(1)
+            warm_workers(client)
             _stream(client, tasks, record)
 
     @contextlib.contextmanager
@@ -88,6 +90,27 @@ class DaskExecutor:
                              f"{str(exc).splitlines()[0] if str(exc) else 'no answer'})") from None
         with client:
             yield client
+
+
+def warm_workers(client) -> None:
+    """Have each worker of the cluster load what a row's processes need before its first row.
+
+    A row's fit and steps run in processes forked from the worker (:mod:`rippleb.pool`),
+    so what the worker has loaded they inherit for free, and what it has not, each of
+    them loads again. The built-in methods (with their compiled kernels), the simulator
+    and the metrics are rippleb's own code, so loading them in the worker gives a
+    method's process nothing it would not have had; a plugin method is still imported
+    only in the processes that run it. A worker that joins later loads them with its
+    first row, as before.
+    """
+    client.run(_warm)
+
+
+def _warm() -> None:
+    import rippleb.metrics  # noqa: F401 - loaded for the forks to inherit
+    import rippleb.simulator  # noqa: F401
+
+    _registry()
 
 
 def _stream(client, tasks: list, record) -> None:

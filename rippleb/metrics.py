@@ -10,6 +10,7 @@ scenario). ``docs/metrics.md`` repeats these formulas.
 from __future__ import annotations
 
 import dataclasses
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,6 +28,8 @@ BAND_FRACTION = 0.5               # bandwidth_hz: H1 averaged over half-octave b
 BAND_STEP = 1.0 / 12.0            # ... centred every 1/12 octave
 BAND_MIN_BINS = 4.0               # lowest centre: at least 4 FFT bins of the shortest chirp window
 HALF_POWER = 1.0 / np.sqrt(2.0)   # -3 dB
+
+_MEMO: dict[int, dict] = {}       # id of a live Truth -> what Truth.remembered computed for it
 
 
 @dataclass(frozen=True)
@@ -50,6 +53,21 @@ class Truth:
     torque_ref: np.ndarray | None = None
     steps: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     chirps: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+
+    def remembered(self, key, compute):
+        """``compute()``, computed once per ``key`` while this truth lives.
+
+        For what the metrics compute from the truth alone (its spectrum, running sums):
+        the rows of a case are scored against one ``Truth``, so each estimate pays only
+        for its own side. Kept beside the instance, not in it, so its fields stay its data.
+        """
+        memo = _MEMO.get(id(self))
+        if memo is None:
+            memo = _MEMO[id(self)] = {}
+            weakref.finalize(self, _MEMO.pop, id(self), None)
+        if key not in memo:
+            memo[key] = compute()
+        return memo[key]
 
     @classmethod
     def from_simulation(cls, sim) -> "Truth":
@@ -116,7 +134,7 @@ def max_error(estimate: np.ndarray, truth: np.ndarray | None, mask: np.ndarray) 
 
 
 def delay_ms(estimate: np.ndarray, truth: np.ndarray | None, mask: np.ndarray, fs: float,
-             max_delay_s: float = MAX_DELAY_S) -> float:
+             max_delay_s: float = MAX_DELAY_S, memo: Truth | None = None) -> float:
     """The lag ``L`` in [0, 100] ms maximising the cross-correlation of estimate and truth.
 
     Over the samples from the first to the last index of ``W`` (``N`` of them), for each
@@ -136,8 +154,11 @@ def delay_ms(estimate: np.ndarray, truth: np.ndarray | None, mask: np.ndarray, f
     ``L*``. Doubling the misfit means the shift has added as much error as the estimate
     already has; on a torque that varies slowly against that error (ripple, noise) it
     takes a shift of tens of milliseconds, and ``L*`` is set by the error, not by a delay.
+
+    ``memo``, the :class:`Truth` that holds ``truth`` and ``mask``, keeps what depends on
+    them alone for the next estimate (the same numbers, computed once).
     """
-    r = _lag_correlation(estimate, truth, mask, fs, max_delay_s)
+    r = _lag_correlation(estimate, truth, mask, fs, max_delay_s, memo)
     if r is None:
         return float("nan")
     best = int(np.argmax(r))
@@ -148,34 +169,50 @@ def delay_ms(estimate: np.ndarray, truth: np.ndarray | None, mask: np.ndarray, f
     return float(1000.0 * best / fs)
 
 
-def _lag_correlation(estimate, truth, mask, fs, max_delay_s) -> np.ndarray | None:
+def _lag_correlation(estimate, truth, mask, fs, max_delay_s, memo=None) -> np.ndarray | None:
     """``r[L]`` of :func:`delay_ms` for ``L = 0 .. max lag`` (``-inf`` where undefined);
     None if it is undefined for every lag."""
     if truth is None or not mask.any():
         return None
-    idx = np.flatnonzero(mask)
-    x = np.asarray(truth[idx[0]: idx[-1] + 1], float)
-    z = np.asarray(estimate[idx[0]: idx[-1] + 1], float)
-    x = x - x.mean()
+    key = ("lag", id(truth), id(mask), fs, max_delay_s)
+    side = (memo.remembered(key, lambda: _truth_side(truth, mask, fs, max_delay_s)) if memo is not None
+            else _truth_side(truth, mask, fs, max_delay_s))
+    if side is None:
+        return None
+    first, n, max_lag, size, x_spectrum_conj, sx, sxx = side
+    z = np.asarray(estimate[first: first + n], float)
     z = z - z.mean()
-    n = len(x)
-    max_lag = min(int(round(max_delay_s * fs)), n - 2)
-    if max_lag < 0 or not np.any(x) or not np.any(z):
+    if not np.any(z):
         return None
     lags = np.arange(max_lag + 1)
     count = n - lags
-    size = 1 << int(np.ceil(np.log2(2 * n)))
-    cross = np.fft.irfft(np.fft.rfft(z, size) * np.conj(np.fft.rfft(x, size)), size)[: max_lag + 1]
+    cross = np.fft.irfft(np.fft.rfft(z, size) * x_spectrum_conj, size)[: max_lag + 1]
     # Sums over the overlaps from cumulative sums: x over [0, n-L), z over [L, n).
-    cx, cxx = _cumsum0(x), _cumsum0(x * x)
     cz, czz = _cumsum0(z), _cumsum0(z * z)
-    sx, sxx = cx[n - lags], cxx[n - lags]
     sz, szz = cz[n] - cz[lags], czz[n] - czz[lags]
     cov = cross - sx * sz / count
     var = np.maximum(sxx - sx * sx / count, 0.0) * np.maximum(szz - sz * sz / count, 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         r = np.where(var > 0, cov / np.sqrt(var), -np.inf)
     return None if not np.isfinite(r).any() else r
+
+
+def _truth_side(truth, mask, fs, max_delay_s):
+    """What :func:`_lag_correlation` needs of the truth alone: the window's first index and
+    length, the largest lag, the FFT size, the conjugate spectrum of the mean-removed truth
+    and its overlap sums per lag; None if the correlation is undefined whatever the estimate."""
+    idx = np.flatnonzero(mask)
+    first = int(idx[0])
+    x = np.asarray(truth[first: idx[-1] + 1], float)
+    x = x - x.mean()
+    n = len(x)
+    max_lag = min(int(round(max_delay_s * fs)), n - 2)
+    if max_lag < 0 or not np.any(x):
+        return None
+    lags = np.arange(max_lag + 1)
+    size = 1 << int(np.ceil(np.log2(2 * n)))
+    cx, cxx = _cumsum0(x), _cumsum0(x * x)
+    return first, n, max_lag, size, np.conj(np.fft.rfft(x, size)), cx[n - lags], cxx[n - lags]
 
 
 def _half_step(y: np.ndarray, i0: int, end: int, baseline: int, change: float) -> int | None:
@@ -317,7 +354,8 @@ def restart_max_error(estimate: np.ndarray, truth: np.ndarray | None, truth_info
     starts = starts[mask[starts]]
     if len(starts) == 0:
         return float("nan")
-    travel = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(truth_info.wave_angle)))])
+    travel = truth_info.remembered("travel", lambda: np.concatenate(
+        [[0.0], np.cumsum(np.abs(np.diff(truth_info.wave_angle)))]))
     worst = 0.0
     for i in starts:
         stop = np.searchsorted(travel, travel[i] + RESTART_ANGLE_RAD, side="left")
@@ -354,7 +392,7 @@ def score(estimate: np.ndarray, truth: Truth) -> dict[str, float]:
         "max_error_nm": max_error(estimate, truth.torque_true, mask),
         "rms_error_ref_nm": rms_error(estimate, truth.torque_ref, mask),
         "max_error_ref_nm": max_error(estimate, truth.torque_ref, mask),
-        "delay_ms": delay_ms(estimate, best, mask, truth.fs),
+        "delay_ms": delay_ms(estimate, best, mask, truth.fs, memo=truth),
         "bandwidth_hz": bandwidth_hz(estimate, best, truth),
         "step_latency_ms": step_latency_ms(estimate, truth),
         "restart_max_error_nm": restart_max_error(estimate, best, truth),

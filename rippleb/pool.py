@@ -17,9 +17,12 @@ writes more than ``max_bytes`` is killed.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import errno
+import gc
 import os
+import resource
 import select
 import signal
 import sys
@@ -106,6 +109,7 @@ class Pool:
                max_bytes: int | None = None) -> None:
         """Start ``fn()`` in an isolated worker; its stdout and stderr go to the file
         ``output`` (or /dev/null), so a chatty plugin cannot garble the CLI's output."""
+        reap_exiting()
         result_r, result_w = os.pipe()
         ctrl_r, ctrl_w = os.pipe()
         sys.stdout.flush()
@@ -125,6 +129,7 @@ class Pool:
         """Block until at least one job ends (or passes its deadline); return those that did."""
         while True:
             finished = self._collect()
+            reap_exiting()
             if finished or not self._running:
                 return finished
             deadlines = [r.deadline for r in self._running if r.deadline is not None]
@@ -141,6 +146,7 @@ class Pool:
         for run in self._running:
             _end(run)
         self._running.clear()
+        reap_exiting()
 
     def _collect(self) -> list[Finished]:
         done, now = [], time.monotonic()
@@ -150,7 +156,7 @@ class Pool:
             if len(run.result) > run.max_bytes:
                 result = Finished(run.key, "oversized", len(run.result), now - run.started)
             elif run.exit_code is not None or run.ctrl_eof:
-                _end(run)  # the worker is gone: drain its pipe to the end
+                _end(run, _EXITING)  # the worker is gone: drain its pipe to the end
                 result = _outcome(run, now)
             elif run.deadline is not None and now >= run.deadline:
                 result = Finished(run.key, "timeout", None, now - run.started)
@@ -190,31 +196,32 @@ def _read(run: _Running) -> None:
             buf += chunk
 
 
-def _end(run: _Running) -> None:
-    """Kill the worker (and so its namespace), let the keeper clean up, reap the keeper."""
+def _end(run: _Running, exiting: list | None = None) -> None:
+    """Kill the worker (and so its namespace), let the keeper clean up, reap the keeper.
+
+    A keeper that has reported its worker's exit has cleaned up already and has only to
+    exit: with ``exiting`` given it is left to exit on its own and reaped later (added
+    to ``exiting``), so the runner starts the next job instead of waiting for an exit.
+    """
     if run.keeper is None:
         return
+    cleaned = exiting is not None and run.exit_code is not None
     if run.exit_code is None and run.worker is not None:
         with contextlib.suppress(ProcessLookupError, PermissionError):
             os.kill(run.worker, signal.SIGKILL)
-    deadline = time.monotonic() + KEEPER_GRACE_S
-    while True:
-        pid, _ = os.waitpid(run.keeper, os.WNOHANG)
-        if pid or time.monotonic() > deadline:
-            break
-        time.sleep(0.005)
-    if not pid:  # the keeper did not finish its cleanup in time: end its whole session
-        with contextlib.suppress(ProcessLookupError, PermissionError):
-            os.killpg(run.keeper, signal.SIGKILL)
-        os.waitpid(run.keeper, 0)
-    # Every writer should be gone now: take what is left in the pipes (bounded in time,
-    # in case an escaped process still holds one), then close them.
+    if cleaned:
+        exiting.append((run.keeper, time.monotonic() + KEEPER_GRACE_S))
+    else:
+        _wait_keeper(run.keeper)
+    # Every writer should be gone now (the keeper ended the worker's processes before it
+    # reported): take what is left in the pipes (bounded in time, in case an escaped
+    # process still holds one), then close them.
     give_up = time.monotonic() + 1.0
-    while not (run.result_eof and run.ctrl_eof) and time.monotonic() < give_up:
+    while not (run.result_eof and (run.ctrl_eof or cleaned)) and time.monotonic() < give_up:
         _read(run)
         if len(run.result) > run.max_bytes:
             break
-        open_fds = [fd for fd, eof in ((run.result_fd, run.result_eof), (run.ctrl_fd, run.ctrl_eof))
+        open_fds = [fd for fd, eof in ((run.result_fd, run.result_eof), (run.ctrl_fd, run.ctrl_eof or cleaned))
                     if not eof]
         if open_fds:
             with contextlib.suppress(InterruptedError):
@@ -224,9 +231,52 @@ def _end(run: _Running) -> None:
     run.keeper = None
 
 
+#: Keepers whose job has ended and that have only to exit: ``(pid, when to stop waiting)``.
+#: Shared by every pool of the process (a Dask worker runs one pool per row), reaped by
+#: the next pool call and at exit.
+_EXITING: list[tuple[int, float]] = []
+
+
+def reap_exiting(block: bool = False) -> None:
+    """Reap the keepers of :data:`_EXITING` that have exited (all of them if ``block``);
+    end any that overstays its grace."""
+    now = time.monotonic()
+    still = []
+    for keeper, deadline in _EXITING:
+        try:
+            pid, _ = os.waitpid(keeper, os.WNOHANG)
+        except ChildProcessError:  # reaped already
+            continue
+        if pid:
+            continue
+        if block or now > deadline:
+            _wait_keeper(keeper, max(0.0, deadline - now))
+        else:
+            still.append((keeper, deadline))
+    _EXITING[:] = still
+
+
+atexit.register(reap_exiting, True)
+
+
+def _wait_keeper(keeper: int, grace_s: float = KEEPER_GRACE_S) -> None:
+    """Reap ``keeper``; if it has not exited within ``grace_s``, end its whole session."""
+    deadline = time.monotonic() + grace_s
+    while True:
+        pid, _ = os.waitpid(keeper, os.WNOHANG)
+        if pid or time.monotonic() > deadline:
+            break
+        time.sleep(0.005)
+    if not pid:  # the keeper did not finish its cleanup in time: end its whole session
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(keeper, signal.SIGKILL)
+        os.waitpid(keeper, 0)
+
+
 def _keeper(fn, result_w: int, ctrl_w: int, memory_mb, output) -> None:
     """rippleb's own process between the runner and a job: session, namespace, cleanup."""
     try:
+        _keep_inherited_pages_shared()
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
         os.setsid()
@@ -244,7 +294,10 @@ def _keeper(fn, result_w: int, ctrl_w: int, memory_mb, output) -> None:
         os.close(result_w)
         _write_all(ctrl_w, f"{worker} {int(isolated)}\n".encode())
         _, status = os.waitpid(worker, 0)
-        isolation.end_descendants()
+        if isolated:  # the kernel ended the namespace with its first process: nothing left to hunt
+            isolation.reap_exited()
+        else:
+            isolation.end_descendants()
         _write_all(ctrl_w, f"{os.waitstatus_to_exitcode(status)}\n".encode())
     finally:
         os._exit(0)
@@ -253,6 +306,7 @@ def _keeper(fn, result_w: int, ctrl_w: int, memory_mb, output) -> None:
 def _worker(fn, result_w: int, memory_mb, output) -> None:
     message = b"R" + b"worker did not start"
     try:
+        _keep_inherited_pages_shared()
         isolation.die_with_parent()
         isolation.close_fds_except(result_w)
         _redirect_output(output)
@@ -270,6 +324,13 @@ def _worker(fn, result_w: int, memory_mb, output) -> None:
     finally:
         # Skip the parent's atexit handlers and buffered files (pytest, tqdm) in the child.
         os._exit(0)
+
+
+def _keep_inherited_pages_shared() -> None:
+    """Exclude every object inherited from the runner from this process's garbage
+    collections: a collection writes to each object it visits, and so would copy, page by
+    page, the whole runner's heap that the fork shares (tens of milliseconds per job)."""
+    gc.freeze()
 
 
 def _write_all(fd: int, data: bytes) -> None:
@@ -309,8 +370,6 @@ def _limit_memory(memory_mb: float | None) -> None:
     if memory_mb is None:
         return
     try:
-        import resource
-
         with open("/proc/self/statm") as fh:
             current = int(fh.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
         limit = current + int(memory_mb * 2**20)
@@ -318,5 +377,5 @@ def _limit_memory(memory_mb: float | None) -> None:
         if hard != resource.RLIM_INFINITY:
             limit = min(limit, hard)
         resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
-    except (OSError, ValueError, ImportError):
+    except (OSError, ValueError):
         pass  # not Linux: run without a memory limit rather than refuse to run

@@ -16,11 +16,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from rippleb import jobs as job_fns
-from rippleb.cache import Artefact, digest, log_bytes, store, unpack
+from rippleb.cache import Artefact, TamperedError, digest, load_log, log_bytes, store, unpack
 from rippleb.data import SensorLog
 from rippleb.metrics import score, tick_stats
 from rippleb.pool import Pool
-from rippleb.registry import Registry
+from rippleb.registry import Registry, one_line
 from rippleb.results import ENVIRONMENT, STATUSES, ResultsFile, RunWarning, system_info
 from rippleb.rows import SCORED, Case, RowKey
 
@@ -70,6 +70,7 @@ class State:
     fits: dict = field(default_factory=dict)        # _Fit -> "pending" | "running" | info dict
     lengths: dict = field(default_factory=dict)     # Case -> (n_samples, n_ticks)
     open_rows: dict = field(default_factory=dict)   # scored Case -> rows not yet recorded
+    logs: dict = field(default_factory=dict)        # scored Case -> its visible log, verified (rows open)
 
 
 def say_retried(dropped: list[dict], out_dir) -> None:
@@ -104,12 +105,19 @@ def _lengths(log: SensorLog) -> tuple[int, int]:
 
 
 def schedule(pool: Pool, state: State, bar) -> None:
+    finished_rows = []   # rows ended but not yet scored
     try:
-        while state.pending or pool.busy:
+        while state.pending or pool.busy or finished_rows:
             while pool.free and state.pending:
                 check_interrupted()
                 if not _start_next(pool, state, bar):
                     break
+            # Score the rows that ended after their slots have new jobs: the slots do not
+            # sit idle while this process scores.
+            while finished_rows:
+                _finish_row(finished_rows.pop(0), state, bar)
+            if not (state.pending or pool.busy):
+                break
             check_interrupted()
             for fin in pool.wait():
                 if isinstance(fin.key, tuple):
@@ -117,9 +125,11 @@ def schedule(pool: Pool, state: State, bar) -> None:
                 elif isinstance(fin.key, Fit):
                     state.fits[fin.key] = _fit_outcome(fin, state)
                 else:
-                    _finish_row(fin, state, bar)
+                    finished_rows.append(fin)
     finally:
         pool.kill_all()
+        while finished_rows:  # interrupted: what finished is still recorded
+            _finish_row(finished_rows.pop(0), state, bar)
 
 
 def _start_next(pool: Pool, state: State, bar) -> bool:
@@ -144,8 +154,13 @@ def _start_next(pool: Pool, state: State, bar) -> bool:
         if state.fits[fit]["status"] != "ok":
             _record(state, key, bar, **_row_fields(state.fits[fit]))
             return True
+        try:
+            evaluation = _evaluation_log(state, case)
+        except TamperedError as exc:
+            _record(state, key, bar, status="error", message=one_line(exc))
+            return True
         n_samples, _ = state.lengths[case]
-        pool.submit(key, _row_job(key, state, state.fits[fit]), state.timeout,
+        pool.submit(key, _row_job(key, state, state.fits[fit], evaluation), state.timeout,
                     _output(state, f"{key.method}--{key.scenario}--{key.condition}--{key.seed}"),
                     max_bytes=24 * n_samples + 2**20)
         return True
@@ -215,9 +230,22 @@ def _environment_first(message: str) -> str:
     return message
 
 
-def _row_job(key: RowKey, state: State, fit: dict):
+def _evaluation_log(state: State, case: Case) -> SensorLog:
+    """The visible log of a scored case, read and verified here once for all its rows.
+
+    A row's process is forked from this one, so it inherits the log instead of reading
+    and hashing the file again (the hash of a one-second log cost each row more than its
+    own process start). A file rewritten before this read fails the rows that would
+    use it, as a row's own check did; one rewritten after it changes nothing.
+    """
+    if case not in state.logs:
+        state.logs[case] = job_fns.visible_log(load_log(state.artefacts[case]), SCORED)
+    return state.logs[case]
+
+
+def _row_job(key: RowKey, state: State, fit: dict, evaluation: SensorLog):
     case, cal_case = state.plan.rows[key]
-    evaluation, calibration = state.artefacts[case], state.artefacts[cal_case]
+    calibration = state.artefacts[cal_case]
     fitted = Artefact(**fit["fitted"]) if isinstance(fit.get("fitted"), dict) else None
     fit_info = {k: fit[k] for k in ("params", "fit_s") if k in fit} if fitted else None
     registry = state.registry
@@ -287,6 +315,7 @@ def _record(state: State, key: RowKey, bar, **fields) -> None:
     state.open_rows[case] -= 1
     if not state.open_rows[case]:
         state.truths.pop(case, None)
+        state.logs.pop(case, None)
 
 
 record = _record  # for executors that run whole rows elsewhere (rippleb.executors)

@@ -3,15 +3,64 @@
 The public API is re-exported here; see the README for the CLI.
 """
 
-from rippleb.simulator.conditions import CONDITIONS, DEFAULT_CONDITION
-from rippleb.dask_executor import DaskExecutor
-from rippleb.data import JointSpec, SensorBlock, SensorLog, make_log, read_log, write_log
-from rippleb.errors import InputError, PluginError, RipplebError
-from rippleb.method import Method
-from rippleb.runner import run, run_log
-from rippleb.scenario import Scenario, builtin_scenarios, load_scenario, scored_scenarios
-from rippleb.simulator import Simulation, simulate
-from rippleb.sweep import run_sweep
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+#: Where each public name lives. They are imported on first use (PEP 562), so that
+#: ``import rippleb`` and ``python -m rippleb --help`` do not pay for numba, scipy and
+#: pinocchio until a name that needs them is asked for.
+_EXPORTS = {
+    "CONDITIONS": "rippleb.simulator.conditions",
+    "DEFAULT_CONDITION": "rippleb.simulator.conditions",
+    "DaskExecutor": "rippleb.dask_executor",
+    "JointSpec": "rippleb.data",
+    "SensorBlock": "rippleb.data",
+    "SensorLog": "rippleb.data",
+    "make_log": "rippleb.data",
+    "read_log": "rippleb.data",
+    "write_log": "rippleb.data",
+    "InputError": "rippleb.errors",
+    "PluginError": "rippleb.errors",
+    "RipplebError": "rippleb.errors",
+    "Method": "rippleb.method",
+    "run": "rippleb.runner",
+    "run_log": "rippleb.runner",
+    "Scenario": "rippleb.scenario",
+    "builtin_scenarios": "rippleb.scenario",
+    "load_scenario": "rippleb.scenario",
+    "scored_scenarios": "rippleb.scenario",
+    "Simulation": "rippleb.simulator",
+    "simulate": "rippleb.simulator",
+    "run_sweep": "rippleb.sweep",
+}
+
+if TYPE_CHECKING:  # what static tools see: the same names, imported eagerly
+    from rippleb.simulator.conditions import CONDITIONS, DEFAULT_CONDITION
+    from rippleb.dask_executor import DaskExecutor
+    from rippleb.data import JointSpec, SensorBlock, SensorLog, make_log, read_log, write_log
+    from rippleb.errors import InputError, PluginError, RipplebError
+    from rippleb.method import Method
+    from rippleb.runner import run, run_log
+    from rippleb.scenario import Scenario, builtin_scenarios, load_scenario, scored_scenarios
+    from rippleb.simulator import Simulation, simulate
+    from rippleb.sweep import run_sweep
+
+
+def __getattr__(name: str):
+    """A public name, imported from its module on first use and kept."""
+    try:
+        module = _EXPORTS[name]
+    except KeyError:
+        raise AttributeError(f"module 'rippleb' has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))
 
 
 def _installed_version() -> str:

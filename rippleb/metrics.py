@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rippleb.dsp import encoder_angle
 
 MAX_DELAY_S = 0.100
 RESTART_ANGLE_RAD = 4.0 * np.pi   # two wave-generator revolutions
@@ -93,6 +92,10 @@ class Truth:
         the last ``REST_HOLD_S`` = 10 ms, inclusive: at the paper's 2500 counts/rev this
         treats motor speeds below 2.4 rpm as rest. The whole log is the evaluation window.
         """
+        # imported here: rippleb.dsp compiles the methods' numba kernels at import, which
+        # the runner, and with it every CLI command, would otherwise pay for at start-up
+        from rippleb.dsp import encoder_angle
+
         return cls(fs=log.spec.fs, eval_mask=np.ones(len(log), bool),
                    moving=moving_from_encoder(log.encoder, log.spec.fs),
                    wave_angle=encoder_angle(log.encoder, log.spec.counts_per_rev),

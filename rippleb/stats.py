@@ -6,6 +6,8 @@ One home for them, so that :mod:`rippleb.tables`, :mod:`rippleb.figures` and
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 CONFIDENCE = 0.95
@@ -31,8 +33,6 @@ def t_interval(values, confidence: float = CONFIDENCE) -> tuple[float, float, in
     mean, half_width, n
         ``half_width`` is NaN for fewer than two values, ``mean`` NaN for none.
     """
-    from scipy import stats
-
     x = np.asarray(values, float)
     x = x[np.isfinite(x)]
     n = len(x)
@@ -41,8 +41,22 @@ def t_interval(values, confidence: float = CONFIDENCE) -> tuple[float, float, in
     mean = float(np.mean(x))
     if n < 2:
         return mean, float("nan"), n
-    half = float(stats.t.ppf(0.5 + confidence / 2.0, n - 1) * np.std(x, ddof=1) / np.sqrt(n))
+    half = float(t_quantile(0.5 + confidence / 2.0, n - 1) * np.std(x, ddof=1) / np.sqrt(n))
     return mean, half, n
+
+
+@functools.lru_cache(maxsize=None)
+def t_quantile(p: float, dof: int) -> float:
+    """The ``p`` quantile of Student's t with ``dof`` degrees of freedom.
+
+    ``scipy.special.stdtrit``, the function ``scipy.stats.t.ppf`` evaluates (same
+    value), without importing ``scipy.stats`` (a second per process) or the
+    distribution machinery's per-call overhead; cached because a report asks for the same
+    few degrees of freedom thousands of times.
+    """
+    from scipy.special import stdtrit
+
+    return float(stdtrit(dof, p))
 
 
 def fmt_interval(mean: float, half: float, digits: int = 3) -> str:

@@ -4,6 +4,19 @@ installs, the browser, property fuzzing) and is what CI runs (``.ci/run``)."""
 
 import pytest
 
+#: Files that one xdist worker runs whole: their tests share a module fixture (one run of
+#: every case, one plugin install, one simulation) or a cache kept per process, which
+#: another worker would compute again. Every other test is handed out on its own.
+ONE_WORKER_FILES = {
+    "test_bad_input.py",      # `outcomes`: every bad-input case run once
+    "test_bandwidth.py",      # the calibration log
+    "test_dask.py",           # clusters started one test at a time
+    "test_faults.py",         # fitted methods and faulty simulations
+    "test_kalman_ripple.py",  # fitted filters
+    "test_order_tracking.py", # simulations and scores cached per process
+    "test_plugins.py",        # the plugins installed once
+}
+
 
 def pytest_addoption(parser):
     parser.addoption("--full", action="store_true",
@@ -41,3 +54,19 @@ def register_methods(monkeypatch):
             return found
         monkeypatch.setattr(Registry, "discover", classmethod(discover))
     return register
+
+
+def pytest_xdist_make_scheduler(config, log):
+    """``--dist load`` (the default in pyproject.toml) hands out single tests, except the
+    files of :data:`ONE_WORKER_FILES`, each given whole to one worker (and first, being
+    the largest units). By file, a long file kept one worker busy while the other idled."""
+    if config.getvalue("dist") != "load":
+        return None   # xdist's own scheduler for --dist loadfile, loadscope, ...
+    from xdist.scheduler import LoadScopeScheduling
+
+    class OneWorkerFiles(LoadScopeScheduling):
+        def _split_scope(self, nodeid):
+            path = nodeid.split("::", 1)[0]
+            return path if path.rsplit("/", 1)[-1] in ONE_WORKER_FILES else nodeid
+
+    return OneWorkerFiles(config, log)

@@ -31,6 +31,16 @@ def test_t_interval_of_known_values():
     assert half == pytest.approx(2.776445 * np.sqrt(2.5) / np.sqrt(5), rel=1e-6)
 
 
+def test_t_quantile_is_scipy_stats_t_ppf_exactly():
+    from scipy import stats
+
+    from rippleb.stats import t_quantile
+
+    for p in (0.9, 0.95, 0.975, 0.995):
+        for dof in (1, 2, 4, 19, 99):
+            assert t_quantile(p, dof) == float(stats.t.ppf(p, dof))
+
+
 def test_t_interval_ignores_nan_and_has_no_width_for_one_value():
     assert report.t_interval([2.0, np.nan])[0] == 2.0
     assert np.isnan(report.t_interval([2.0, np.nan])[1])

@@ -250,7 +250,7 @@ def _warm(registry, plan: Plan) -> None:
     """Load in the fork server what the jobs of ``plan`` would each load again: the
     simulator with the arm models of its scenarios, and its built-in methods with their
     compiled kernels. Plugins are not imported here: only workers run plugin code."""
-    from rippleb.simulator import robot
+    from rippleb.simulator import robot, simulation  # noqa: F401 - the joint's kernels with it
 
     for scenario, _ in plan.sims.values():
         robot.load_model(scenario.robot)

@@ -16,11 +16,45 @@ module                    what it holds
 ========================  ==========================================================
 
 Every default is listed with its source in ``docs/physics.md``.
+
+The names below are imported on first use (PEP 562): the runner and the CLI need the
+deployment conditions (``rippleb.simulator.conditions``) without paying for the joint's
+compiled kernels and Pinocchio, which only simulating needs.
 """
 
-from rippleb.simulator.device import Device
-from rippleb.simulator.joint import twist
-from rippleb.simulator.sensors import quantise
-from rippleb.simulator.simulation import Simulation, simulate
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+_EXPORTS = {
+    "Device": "rippleb.simulator.device",
+    "twist": "rippleb.simulator.joint",
+    "quantise": "rippleb.simulator.sensors",
+    "Simulation": "rippleb.simulator.simulation",
+    "simulate": "rippleb.simulator.simulation",
+}
+
+if TYPE_CHECKING:  # what static tools see: the same names, imported eagerly
+    from rippleb.simulator.device import Device
+    from rippleb.simulator.joint import twist
+    from rippleb.simulator.sensors import quantise
+    from rippleb.simulator.simulation import Simulation, simulate
+
+
+def __getattr__(name: str):
+    """A public name, imported from its module on first use and kept."""
+    try:
+        module = _EXPORTS[name]
+    except KeyError:
+        raise AttributeError(f"module 'rippleb.simulator' has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))
+
 
 __all__ = ["Device", "Simulation", "quantise", "simulate", "twist"]

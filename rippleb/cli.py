@@ -191,9 +191,10 @@ LIST_WIDTH = 100
 
 def cmd_list(args) -> int:
     """``rippleb list``."""
-    from rippleb.simulator.conditions import CONDITIONS
+    from rippleb.errors import PluginError
     from rippleb.registry import Registry
     from rippleb.scenario import builtin_scenarios, load_scenario
+    from rippleb.simulator.conditions import CONDITIONS
 
     registry = Registry.discover()
     timeout = _limit("--import-timeout", args.import_timeout) or None
@@ -201,6 +202,9 @@ def cmd_list(args) -> int:
     print("methods:")
     for name in registry.names():
         entry = registry.entries[name]
+        if entry.origin == "builtin":  # rippleb's own code: imported here, not probed
+            with contextlib.suppress(PluginError):
+                entry.load()
         error = entry.error or errors.get(name)
         if error:
             print(f"  {name:<28} {'broken':<10} {entry.source}  {error}")

@@ -1,13 +1,15 @@
 """Discovery of methods: built-ins from ``rippleb.methods`` and third-party entry points.
 
-Built-in methods are the :class:`~rippleb.method.Method` subclasses with a ``name``
-defined in the modules of the package ``rippleb.methods`` (the top-level ``methods/``
-directory of the repository). A module may define several methods. Third-party methods
-register in the entry-point group ``rippleb.methods``; the entry point's name is the
-method's name, and its module is imported only when the method is used (or listed).
+Built-in methods are the classes that set a string ``name`` at the top level of the
+modules of the package ``rippleb.methods`` (the top-level ``methods/`` directory of the
+repository), found by reading the modules' source. A module may define several methods.
+Third-party methods register in the entry-point group ``rippleb.methods``; the entry
+point's name is the method's name. Neither is imported until the method is used (or
+listed), so naming the methods costs no import of scipy or of compiled kernels.
 
 A module or entry point that fails to import becomes a *broken* entry with its error as
-one line; the others keep working. Two methods with one name raise
+one line (a built-in module that cannot even be parsed is listed in
+``Registry.broken_modules``); the others keep working. Two methods with one name raise
 :class:`~rippleb.errors.PluginError`, naming both sources.
 
 Examples
@@ -20,12 +22,15 @@ True
 
 from __future__ import annotations
 
+import ast
 import difflib
 import importlib
 import importlib.metadata
+import importlib.util
 import inspect
 import pkgutil
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from rippleb.errors import InputError, PluginError
 from rippleb.method import Method
@@ -103,7 +108,7 @@ class Registry:
 
     @classmethod
     def discover(cls, group: str = GROUP) -> "Registry":
-        """Import the built-in modules and list (without importing) the entry points."""
+        """List the built-in methods (read from their source) and the entry points, importing neither."""
         entries, broken = _builtin_entries()
         for entry in _plugin_entries(group):
             if entry.name in entries:
@@ -141,34 +146,46 @@ def unknown_name(kind: str, name: str, known: list[str]) -> str:
 
 
 def _builtin_entries() -> tuple[dict[str, Entry], dict[str, str]]:
-    package = importlib.import_module(BUILTIN_PACKAGE)
+    """The built-in methods, found by reading their modules' source, not importing them:
+    importing every family (scipy.signal, numba kernels) cost each CLI call about 2 s
+    before it could even say a name is unknown. A class is a method if it sets a string
+    ``name``; it is imported on first :meth:`Entry.load`, like a plugin."""
+    package = importlib.util.find_spec(BUILTIN_PACKAGE)
     entries: dict[str, Entry] = {}
     broken: dict[str, str] = {}
-    for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda i: i.name):
+    for info in sorted(pkgutil.iter_modules(package.submodule_search_locations), key=lambda i: i.name):
         if info.name.startswith("_"):
             continue
         module_name = f"{BUILTIN_PACKAGE}.{info.name}"
         try:
-            module = importlib.import_module(module_name)
-        except BaseException as exc:  # keep the other built-ins usable whatever one raises
-            if isinstance(exc, KeyboardInterrupt):
-                raise
+            found = _method_classes(importlib.util.find_spec(module_name).origin)
+        except (OSError, SyntaxError, ValueError) as exc:
             broken[module_name] = one_line(exc)
             continue
-        for cls in _methods_defined_in(module):
-            if cls.name in entries:
-                raise PluginError(f"two methods are named {cls.name!r}: "
-                                  f"{entries[cls.name].source} and {module_name}")
-            entries[cls.name] = Entry(cls.name, "builtin", module_name, cls=cls)
+        for name, class_name in found:
+            if name in entries:
+                raise PluginError(f"two methods are named {name!r}: "
+                                  f"{entries[name].source} and {module_name}")
+            point = importlib.metadata.EntryPoint(name, f"{module_name}:{class_name}", GROUP)
+            entries[name] = Entry(name, "builtin", module_name, _entry_point=point)
     return entries, broken
 
 
-def _methods_defined_in(module) -> list[type]:
-    # Only classes defined here: a module that imports another family's class must not
-    # register it twice.
-    return [obj for _, obj in inspect.getmembers(module, inspect.isclass)
-            if issubclass(obj, Method) and obj is not Method and obj.name
-            and obj.__module__ == module.__name__]
+def _method_classes(path: str) -> list[tuple[str, str]]:
+    """``(method name, class name)`` of every top-level class of the module at ``path``
+    that sets ``name = "..."`` in its body."""
+    tree = ast.parse(Path(path).read_text(encoding="utf-8"), filename=path)
+    found = []
+    for node in tree.body:
+        if not isinstance(node, ast.ClassDef):
+            continue
+        for statement in node.body:
+            if (isinstance(statement, ast.Assign) and len(statement.targets) == 1
+                    and isinstance(statement.targets[0], ast.Name) and statement.targets[0].id == "name"
+                    and isinstance(statement.value, ast.Constant) and isinstance(statement.value.value, str)
+                    and statement.value.value):
+                found.append((statement.value.value, node.name))
+    return found
 
 
 def _plugin_entries(group: str) -> list[Entry]:

@@ -67,14 +67,22 @@ def test_a_module_may_define_several_methods_and_imports_are_not_counted_twice(p
     assert Registry.discover().names() == ["a", "a-ablation"]
 
 
-def test_a_broken_builtin_module_is_listed_and_the_others_work(pkgdir, monkeypatch):
+def test_a_broken_builtin_module_costs_only_its_own_methods(pkgdir, monkeypatch):
     _module(pkgdir, "fakebuiltin.__init__", "")
     _module(pkgdir, "fakebuiltin.good", PLUGIN)
-    _module(pkgdir, "fakebuiltin.bad", "import numpy\nraise RuntimeError('no licence file\\nmore')\n")
+    _module(pkgdir, "fakebuiltin.bad", "import numpy\nraise RuntimeError('no licence file\\nmore')\n"
+                                       "class Bad:\n    name = 'bad'\n")
+    _module(pkgdir, "fakebuiltin.garbled", "class (:\n")
     monkeypatch.setattr(reg, "BUILTIN_PACKAGE", "fakebuiltin")
     found = Registry.discover()
-    assert found.names() == ["zero"]
-    assert found.broken_modules == {"fakebuiltin.bad": "RuntimeError: no licence file"}
+    assert found.names() == ["bad", "zero"]              # read from the source ...
+    assert "fakebuiltin.good" not in sys.modules         # ... without importing it
+    assert found.get("zero").load().__name__ == "Zero"
+    with pytest.raises(PluginError, match="no licence file"):
+        found.get("bad").load()
+    assert found.get("bad").error == "RuntimeError: no licence file"
+    assert list(found.broken_modules) == ["fakebuiltin.garbled"]
+    assert found.broken_modules["fakebuiltin.garbled"].startswith("SyntaxError")
 
 
 def test_plugins_load_lazily_and_broken_ones_show_their_error(pkgdir, monkeypatch):

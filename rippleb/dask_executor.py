@@ -108,9 +108,9 @@ def warm_workers(client) -> None:
 
 def _warm() -> None:
     import rippleb.metrics  # noqa: F401 - loaded for the forks to inherit
-    import rippleb.simulator  # noqa: F401
+    import rippleb.simulator.simulation  # noqa: F401 - with the joint's compiled kernels
 
-    _registry()
+    _registry().load_builtins()
 
 
 def _stream(client, tasks: list, record) -> None:

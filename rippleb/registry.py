@@ -129,6 +129,17 @@ class Registry:
         except KeyError:
             raise InputError(unknown_name("method", name, self.names())) from None
 
+    def load_builtins(self, names=None) -> None:
+        """Import the built-in methods (all, or those of ``names``): rippleb's own code,
+        loaded ahead in a process that forks rows so that they inherit it. Plugins are
+        never imported here; a broken built-in keeps its error for its rows."""
+        for name, entry in self.entries.items():
+            if entry.origin == "builtin" and (names is None or name in names):
+                try:
+                    entry.load()
+                except PluginError:
+                    pass
+
     def load_all(self) -> None:
         """Import every plugin so that broken ones show their error (for ``rippleb list``)."""
         for entry in self.entries.values():

@@ -254,10 +254,7 @@ def _warm(registry, plan: Plan) -> None:
 
     for scenario, _ in plan.sims.values():
         robot.load_model(scenario.robot)
-    for method in {key.method for key in plan.rows}:
-        entry = registry.entries.get(method)
-        if entry is not None and entry.origin == "builtin" and not entry.broken:
-            entry.load()
+    registry.load_builtins({key.method for key in plan.rows})
 
 
 def default_out_dir() -> Path:

@@ -15,16 +15,13 @@ Run: ``python benchmarks/calibration_reference.py [--seeds 0-2] [--scenarios pap
 from __future__ import annotations
 
 import argparse
-import copy
 import dataclasses
 
 import numpy as np
 
-from condition_table import seeds_of
-from rippleb.metrics import Truth, score
+from condition_table import rms_error, seeds_of
 from rippleb.registry import Registry
 from rippleb.simulator import simulate
-from rippleb.streaming import prepare_blocks, stream
 
 DEFAULT_METHODS = "angle-adaptive,angle-adaptive-frozen,kalman-ripple,order-tracking,switched-notch"
 
@@ -47,12 +44,7 @@ def table(methods, scenarios, seeds) -> dict:
                 fitted = registry.get(name).load()()
                 fitted.fit(cal)
                 for sim in sims:
-                    visible = sim.log.for_method(keep_ref=False)
-                    method = copy.deepcopy(fitted)
-                    method.reset(visible.spec)
-                    estimate, _ = stream(method.step, prepare_blocks(visible), len(visible))
-                    rms = score(estimate, Truth.from_simulation(sim))["rms_error_nm"]
-                    out.setdefault((name, reference), []).append(rms)
+                    out.setdefault((name, reference), []).append(rms_error(fitted, sim))
     return out
 
 

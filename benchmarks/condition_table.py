@@ -47,15 +47,23 @@ def table(methods, scenarios, conditions, seeds, calibration="calibration") -> d
         for scenario in scenarios:
             for condition in conditions:
                 sim = simulate(scenario, seed, condition)
-                visible = sim.log.for_method(keep_ref=False)
-                blocks = prepare_blocks(visible)
+                blocks = prepare_blocks(sim.log.for_method(keep_ref=False))
                 for name in methods:
-                    method = copy.deepcopy(fitted[name])
-                    method.reset(visible.spec)
-                    estimate, _ = stream(method.step, blocks, len(visible))
-                    rms = score(estimate, Truth.from_simulation(sim))["rms_error_nm"]
+                    rms = rms_error(fitted[name], sim, blocks)
                     out.setdefault((name, scenario, condition), []).append(rms)
     return out
+
+
+def rms_error(fitted, sim, blocks=None) -> float:
+    """``rms_error_nm`` of a copy of the ``fitted`` method streamed over ``sim``'s log as
+    the runner does (``reset``, then one ``step`` per tick); ``blocks`` from
+    :func:`~rippleb.streaming.prepare_blocks` of the visible log, when already cut."""
+    visible = sim.log.for_method(keep_ref=False)
+    method = copy.deepcopy(fitted)
+    method.reset(visible.spec)
+    blocks = prepare_blocks(visible) if blocks is None else blocks
+    estimate, _ = stream(method.step, blocks, len(visible))
+    return score(estimate, Truth.from_simulation(sim))["rms_error_nm"]
 
 
 def main(argv=None) -> None:

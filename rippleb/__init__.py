@@ -5,8 +5,9 @@ The public API is re-exported here; see the README for the CLI.
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
+
+from rippleb._lazy import lazy_exports
 
 #: Where each public name lives. They are imported on first use (PEP 562), so that
 #: ``import rippleb`` and ``python -m rippleb --help`` do not pay for numba, scipy and
@@ -48,19 +49,7 @@ if TYPE_CHECKING:  # what static tools see: the same names, imported eagerly
     from rippleb.sweep import run_sweep
 
 
-def __getattr__(name: str):
-    """A public name, imported from its module on first use and kept."""
-    try:
-        module = _EXPORTS[name]
-    except KeyError:
-        raise AttributeError(f"module 'rippleb' has no attribute {name!r}") from None
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS))
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 
 def _installed_version() -> str:

@@ -124,7 +124,7 @@ def _receive(sock: socket.socket):
     """The next request, or None once the runner has closed its end."""
     try:
         head, fds, _, _ = socket.recv_fds(sock, _LENGTH.size, 2)
-    except (ConnectionResetError, OSError):
+    except OSError:  # the runner is gone
         return None
     if not head:
         return None

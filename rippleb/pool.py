@@ -125,19 +125,17 @@ class Pool:
         reap_exiting()
         result_r, result_w = os.pipe()
         ctrl_r, ctrl_w = os.pipe()
-        if self.server is not None:
-            try:
+        try:
+            if self.server is not None:
                 pid = self.server.spawn(fn, result_w, ctrl_w, self.memory_mb, output)
-            finally:
-                os.close(result_w)
-                os.close(ctrl_w)
-        else:
-            bound = fn if self.context is None else functools.partial(fn, self.context)
-            sys.stdout.flush()
-            sys.stderr.flush()
-            pid = os.fork()
-            if pid == 0:
-                keeper(bound, result_w, ctrl_w, self.memory_mb, output)  # never returns
+            else:
+                bound = fn if self.context is None else functools.partial(fn, self.context)
+                sys.stdout.flush()
+                sys.stderr.flush()
+                pid = os.fork()
+                if pid == 0:
+                    keeper(bound, result_w, ctrl_w, self.memory_mb, output)  # never returns
+        finally:  # the keeper holds the write ends now (or no keeper started)
             os.close(result_w)
             os.close(ctrl_w)
         for fd in (result_r, ctrl_r):

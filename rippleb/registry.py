@@ -133,20 +133,21 @@ class Registry:
         """Import the built-in methods (all, or those of ``names``): rippleb's own code,
         loaded ahead in a process that forks rows so that they inherit it. Plugins are
         never imported here; a broken built-in keeps its error for its rows."""
-        for name, entry in self.entries.items():
-            if entry.origin == "builtin" and (names is None or name in names):
-                try:
-                    entry.load()
-                except PluginError:
-                    pass
+        _load_quietly(e for n, e in self.entries.items()
+                      if e.origin == "builtin" and (names is None or n in names))
 
     def load_all(self) -> None:
         """Import every plugin so that broken ones show their error (for ``rippleb list``)."""
-        for entry in self.entries.values():
-            try:
-                entry.load()
-            except PluginError:
-                pass
+        _load_quietly(self.entries.values())
+
+
+def _load_quietly(entries) -> None:
+    """Load each entry; a broken one keeps its error (``Entry.error``) instead of raising."""
+    for entry in entries:
+        try:
+            entry.load()
+        except PluginError:
+            pass
 
 
 def unknown_name(kind: str, name: str, known: list[str]) -> str:

@@ -24,8 +24,9 @@ compiled kernels and Pinocchio, which only simulating needs.
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
+
+from rippleb._lazy import lazy_exports
 
 _EXPORTS = {
     "Device": "rippleb.simulator.device",
@@ -42,19 +43,7 @@ if TYPE_CHECKING:  # what static tools see: the same names, imported eagerly
     from rippleb.simulator.simulation import Simulation, simulate
 
 
-def __getattr__(name: str):
-    """A public name, imported from its module on first use and kept."""
-    try:
-        module = _EXPORTS[name]
-    except KeyError:
-        raise AttributeError(f"module 'rippleb.simulator' has no attribute {name!r}") from None
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS))
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 
 __all__ = ["Device", "Simulation", "quantise", "simulate", "twist"]

@@ -17,11 +17,11 @@ does not chatter. Below the lowest band (half a spacing under ``min_speed``) the
 passes through unfiltered: there the ripple lies inside the torque band, and a notch
 would remove torque as much as ripple. Above the highest band the highest band stays on.
 
-Every band runs all the time (kept warm), so a switch never starts a cold filter: the
-whole bank is one block-diagonal linear system advanced once per tick with precomputed
-lifted matrices (``x_L = A^L x_0 + R u``, one batched matrix product), and the active
-band's output is one more product (``y = O x_0 + T u``). Gain and offset come from a
-least-squares fit of the calibration strain to the known torque.
+Every band runs all the time (kept warm), so a switch never starts a cold filter: each
+band is kept as independent 2-state modes (its notches' pole pairs), and one compiled
+loop advances every mode of the bank sample by sample; the active band's output is the
+sum over its modes. Gain and offset come from a least-squares fit of the calibration
+strain to the known torque.
 
 Examples
 --------
@@ -36,8 +36,11 @@ import math
 import numpy as np
 from scipy import signal
 
+from numba import types
+
 from rippleb.data import JointSpec, SensorBlock, SensorLog
-from rippleb.dsp import biquad_ss, fit_gain_offset, lift, series_ss, steady_state
+from rippleb.dsp import (F8, F8_C, IN_F8, IN_I8, biquad_ss, compiled, fit_gain_offset,
+                         series_ss, steady_state)
 from rippleb.method import Method
 
 OFF = -1  # band index of the pass-through state below the lowest band
@@ -76,14 +79,14 @@ def bank_size(min_speed: float, max_speed: float, q: float, hysteresis: float,
     return max(2, int(np.ceil(np.log(max_speed / min_speed) / spacing)) + 1)
 
 
-def select_band(speed: float, current: int, centres: np.ndarray, hysteresis: float) -> int:
+@compiled(types.int64(types.float64, types.int64, IN_F8, types.float64))
+def select_band(speed, current, centres, hysteresis):
     """The band for ``speed`` [rev/s] given the ``current`` one, with hysteresis.
 
     In the coordinate ``p = log(speed / c_0) / log(spacing)`` band ``j`` owns
     ``|p - j| <= 0.5``; the current band is kept while ``|p - j| <= 0.5 + hysteresis``.
     ``OFF`` (pass-through) sits at ``p = -1``.
     """
-    # scalar math, not numpy: this runs once per control tick
     spacing = math.log(centres[1] / centres[0]) if len(centres) > 1 else math.log(2.0)
     p = math.log(max(speed, 1e-12) / centres[0]) / spacing
     if abs(p - current) <= 0.5 + hysteresis:
@@ -91,6 +94,64 @@ def select_band(speed: float, current: int, centres: np.ndarray, hysteresis: flo
     if current == len(centres) - 1 and p > current:
         return current
     return min(max(round(p), OFF), len(centres) - 1)
+
+
+I8_C = types.int64[::1]
+#: C-contiguous read-only coefficients: contiguity lets the compiler vectorise the mode loop
+IN_F8_C = types.Array(types.float64, 1, "C", readonly=True)
+#: streaming counters of :func:`notch_stream`, kept in one int64 array between calls
+BAND, PHASE, N_MARKS, OLDEST = range(4)
+
+
+@compiled(types.float64(I8_C, I8_C, types.int64, types.int64, types.float64, types.float64))
+def tick_speed(marks, at, count, tick, fs, counts_per_rev):
+    """Record ``count`` in the ring ``marks`` of the last tick ends; the speed over it [rev/s]."""
+    size = len(marks)
+    if at[N_MARKS] < size:
+        marks[(at[OLDEST] + at[N_MARKS]) % size] = count
+        at[N_MARKS] += 1
+    else:
+        marks[at[OLDEST]] = count
+        at[OLDEST] = (at[OLDEST] + 1) % size
+    span = (at[N_MARKS] - 1) * tick / fs
+    return abs(count - marks[at[OLDEST]]) / counts_per_rev / span
+
+
+@compiled(types.void(IN_F8, IN_I8, F8, F8_C, F8_C, IN_F8_C, IN_F8_C, IN_F8_C, IN_F8_C, IN_F8,
+                     IN_F8, I8_C, I8_C, types.float64, types.int64, types.float64, types.float64))
+def notch_stream(u, counts, y, x0, x1, decay, turn, c0, c1, d, centres, marks, at, hysteresis,
+                 tick, fs, counts_per_rev):
+    """Filter ``u`` into ``y`` with the active band while the whole bank runs, in place.
+
+    The bank is kept as independent 2-state modes (one per notch pole pair), the same
+    number per band, band after band. Mode ``m`` is the pole pair ``decay +- i turn`` in
+    coordinates where the input enters its first state with unit weight:
+    ``[x0, x1]' = [[decay, turn], [-turn, decay]] [x0, x1] + [u, 0]``; the active band's
+    output is the sum of ``c0 x0 + c1 x1`` over its modes plus ``d u``. One flat loop over
+    every mode of every band per sample, which the compiler vectorises. At the end of
+    every ``tick`` samples the encoder speed picks the band (:func:`select_band`).
+    """
+    modes = len(x0) // len(centres)
+    band, phase = at[BAND], at[PHASE]     # locals in the loop: no stores through ``at``
+    for i in range(len(u)):
+        ui = u[i]
+        if band == OFF:
+            y[i] = ui
+        else:
+            acc = d[band] * ui
+            for m in range(band * modes, (band + 1) * modes):
+                acc += c0[m] * x0[m] + c1[m] * x1[m]
+            y[i] = acc
+        for m in range(len(x0)):
+            p, q = x0[m], x1[m]
+            x0[m] = decay[m] * p + turn[m] * q + ui
+            x1[m] = decay[m] * q - turn[m] * p
+        phase += 1
+        if phase == tick:
+            phase = 0
+            speed = tick_speed(marks, at, counts[i], tick, fs, counts_per_rev)
+            band = select_band(speed, band, centres, hysteresis)
+    at[BAND], at[PHASE] = band, phase
 
 
 class SwitchedNotch(Method):
@@ -132,8 +193,8 @@ class SwitchedNotch(Method):
     # -- identification --------------------------------------------------------------
     def fit(self, calibration: SensorLog) -> None:
         """Least-squares gain and offset of the strain against the known torque, and the
-        bank designed for the calibration's rate and tick (a device streams at the rate it
-        was calibrated at, so ``reset`` then reuses it instead of designing it per run)."""
+        bank designed for the calibration's rate (a device streams at the rate it was
+        calibrated at, so ``reset`` then reuses it instead of designing it per run)."""
         self.gain_, self.offset_ = fit_gain_offset(calibration.strain, calibration.torque_ref)
         self.design_ = self._design(calibration.spec)
 
@@ -149,50 +210,44 @@ class SwitchedNotch(Method):
         for name, value in design.items():
             if name != "key":
                 setattr(self, name, value)
-        self.lifted_ = dict(self.lifted_)  # lengths met while streaming are this run's own
         self.x0_ = self.x1_ = None    # modal bank state, set by the first sample
-        self.band_ = OFF
-        self.phase_ = 0               # samples since the last tick boundary
-        self.marks_ = []              # encoder counts at the last tick boundaries
+        self.marks_ = np.zeros(self.speed_window + 1, dtype=np.int64)  # counts at tick ends
+        self.at_ = np.array([OFF, 0, 0, 0], dtype=np.int64)             # BAND, PHASE, ...
+
+    @property
+    def band_(self) -> int:
+        """Index of the active band (``OFF`` for pass-through)."""
+        return int(self.at_[BAND])
 
     def _design_key(self, spec: JointSpec) -> tuple:
-        return (spec.fs, spec.block_size, tuple(sorted(self.get_params().items(), key=str)))
+        return (spec.fs, tuple(sorted(self.get_params().items(), key=str)))
 
     def _design(self, spec: JointSpec) -> dict:
-        """The bank for ``spec``: centres, padded band filters, their modal bases, and the
-        lifted matrices of the runner's block length (built before the first tick)."""
+        """The bank for ``spec``: centres, band filters padded to one state count, and
+        their modes (:func:`normal_modes`), band after band in flat arrays."""
         n_bands = self.n_bands or bank_size(self.min_speed, self.max_speed, self.q, self.hysteresis)
         centres = band_centres(self.min_speed, self.max_speed, n_bands)
         bands = [band_filter(c, self.orders, self.q, spec.fs) for c in centres]
         n_states = max(b[0].shape[0] for b in bands)
-        self.bands_ = [_pad(b, n_states) for b in bands]
-        self.from_modal_ = [modal_basis(b[0]) for b in self.bands_]
-        self.to_modal_ = [np.linalg.inv(v) for v in self.from_modal_]
-        self.tick_ = spec.block_size
-        self.lifted_ = {}
-        self._lifted(self.tick_)
-        return {"key": self._design_key(spec), "centres_": centres, "n_states_": n_states,
-                "bands_": self.bands_, "modes_": n_states // 2, "from_modal_": self.from_modal_,
-                "to_modal_": self.to_modal_, "tick_": self.tick_, "lifted_": self.lifted_}
+        bands = [_pad(b, n_states) for b in bands]
+        parts = [normal_modes(*band) for band in bands]
+        design = {name: np.concatenate([p[k] for p in parts])
+                  for k, name in enumerate(["decay_", "turn_", "c0_", "c1_"])}
+        design.update(key=self._design_key(spec), centres_=centres, bands_=bands,
+                      d_=np.array([D[0] for _, _, _, D in bands]),
+                      to_modal_=[p[4] for p in parts])
+        return design
 
     def step(self, block: SensorBlock) -> np.ndarray:
-        """Notch the strain with the active band, segment by segment of the tick grid."""
+        """Notch the strain with the active band; the band is picked on the tick grid."""
         u = np.asarray(block.strain, dtype=float)
+        counts = np.asarray(block.encoder, dtype=np.int64)
         if self.x0_ is None and len(u):
-            self._start(u[0], int(block.encoder[0]))
-        if len(u) == self.tick_ and self.phase_ == 0:     # the runner's case: one segment
-            y = self._segment(u)
-            self._tick_boundary(int(block.encoder[-1]))
-        else:
-            y = np.empty_like(u)
-            pos = 0
-            while pos < len(u):
-                m = min(self.tick_ - self.phase_, len(u) - pos)
-                y[pos:pos + m] = self._segment(u[pos:pos + m])
-                pos += m
-                self.phase_ = (self.phase_ + m) % self.tick_
-                if self.phase_ == 0:
-                    self._tick_boundary(int(block.encoder[pos - 1]))
+            self._start(u[0], int(counts[0]))
+        y = np.empty_like(u)
+        notch_stream(u, counts, y, self.x0_, self.x1_, self.decay_, self.turn_, self.c0_,
+                     self.c1_, self.d_, self.centres_, self.marks_, self.at_, float(self.hysteresis), int(self.spec_.block_size),
+                     float(self.spec_.fs), float(self.spec_.counts_per_rev))
         return self.gain_ * y + self.offset_
 
     def _start(self, u0: float, count0: int) -> None:
@@ -201,64 +256,45 @@ class SwitchedNotch(Method):
                        for (A, B, _, _), ti in zip(self.bands_, self.to_modal_)])
         self.x0_ = np.ascontiguousarray(xi[:, 0::2]).ravel()   # first state of each mode
         self.x1_ = np.ascontiguousarray(xi[:, 1::2]).ravel()   # second state of each mode
-        self.marks_ = [count0]
+        self.marks_[0] = count0
+        self.at_[N_MARKS] = 1
 
-    def _segment(self, u: np.ndarray) -> np.ndarray:
-        """Output of the active band over ``u`` and the whole bank's state update.
 
-        In modal coordinates every band is three independent 2-state modes, so the
-        update of the whole bank is four elementwise products and two matrix-vector
-        products, about half the cost of a batched product of the 6x6 blocks.
-        """
-        a00, a01, a10, a11, R0, R1, OT = self._lifted(len(u))
-        x0, x1 = self.x0_, self.x1_
-        band = self.band_
-        if band == OFF:
-            y = u.copy()
-        else:
-            k = self.modes_
-            sel = slice(band * k, (band + 1) * k)
-            y = OT[band] @ np.concatenate([x0[sel], x1[sel], u])
-        n0 = a00 * x0
-        n0 += a01 * x1
-        n0 += R0 @ u
-        n1 = a10 * x0
-        n1 += a11 * x1
-        n1 += R1 @ u
-        self.x0_, self.x1_ = n0, n1
-        return y
+def normal_modes(A, B, C, D):
+    """One band as independent modes whose input enters the first state with weight 1.
 
-    def _tick_boundary(self, count: int) -> None:
-        """Measure the speed over the last ticks and pick the band."""
-        marks = self.marks_
-        marks.append(count)
-        if len(marks) > self.speed_window + 1:
-            del marks[0]
-        span = (len(marks) - 1) * self.tick_ / self.spec_.fs
-        speed = abs(marks[-1] - marks[0]) / self.spec_.counts_per_rev / span
-        self.band_ = select_band(speed, self.band_, self.centres_, self.hysteresis)
+    In the real modal basis (:func:`modal_basis`) each pole pair ``s +- i w`` is the block
+    ``[[s, w], [-w, s]]``, which commutes with rotations and scalings; rotating and scaling
+    each mode so that its input vector becomes ``(1, 0)`` leaves the block unchanged and
+    takes two multiplications per mode and sample off the update.
 
-    def _lifted(self, m: int):
-        """Lifted matrices of every band for a segment of ``m`` samples, in modal
-        coordinates, cached: the 2x2 mode blocks of ``A^m`` as four vectors, the input
-        maps of the first and second state of each mode, and ``[O | T]`` per band."""
-        if m not in self.lifted_:
-            blocks, inputs, outputs = [], [], []
-            for band, ti, v in zip(self.bands_, self.to_modal_, self.from_modal_):
-                O, T, Am, R = lift(*band, m)
-                blocks.append(ti @ Am @ v)
-                inputs.append(ti @ R)
-                Ov = O @ v
-                outputs.append(np.hstack([Ov[:, 0::2], Ov[:, 1::2], T]))
-            blocks = np.array(blocks)
-            idx = np.arange(0, blocks.shape[1], 2)
-            a00, a01 = blocks[:, idx, idx].ravel(), blocks[:, idx, idx + 1].ravel()
-            a10, a11 = blocks[:, idx + 1, idx].ravel(), blocks[:, idx + 1, idx + 1].ravel()
-            R = np.array(inputs)
-            R0 = np.ascontiguousarray(R[:, 0::2, :]).reshape(-1, m)
-            R1 = np.ascontiguousarray(R[:, 1::2, :]).reshape(-1, m)
-            self.lifted_[m] = (a00, a01, a10, a11, R0, R1, np.array(outputs))
-        return self.lifted_[m]
+    Returns
+    -------
+    decay, turn, c0, c1
+        Per mode: ``s``, ``w`` and the two output weights.
+    to_modal
+        The map from the band's own state to these coordinates.
+    """
+    v = modal_basis(A)
+    to_modal = np.linalg.inv(v)
+    blocks, b, c = to_modal @ A @ v, to_modal @ B, C[0] @ v
+    n = A.shape[0]
+    for k in range(0, n, 2):
+        bk = np.hypot(b[k], b[k + 1])
+        if bk == 0.0:                        # a padding mode: no input, no output
+            continue
+        # rotation R with R b = (|b|, 0), then 1/|b|: T = R / |b|
+        cos, sin = b[k] / bk, b[k + 1] / bk
+        T = np.array([[cos, sin], [-sin, cos]]) / bk
+        to_modal[k:k + 2] = T @ to_modal[k:k + 2]
+        c[k:k + 2] = c[k:k + 2] @ np.linalg.inv(T)
+    blocks = to_modal @ A @ np.linalg.inv(to_modal)
+    decay, turn = blocks.diagonal()[0::2].copy(), blocks.diagonal(1)[0::2].copy()
+    off = blocks - np.kron(np.eye(n // 2), np.ones((2, 2))) * blocks
+    rotation = np.abs(blocks.diagonal(-1)[0::2] + turn).max(initial=0.0)
+    if np.abs(off).max(initial=0.0) > 1e-9 or rotation > 1e-9:
+        raise ValueError("a band filter did not split into rotation-scaling modes")
+    return decay, turn, c[0::2].copy(), c[1::2].copy(), to_modal
 
 
 def modal_basis(A: np.ndarray) -> np.ndarray:

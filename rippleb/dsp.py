@@ -52,49 +52,6 @@ def encoder_angle(counts: np.ndarray, counts_per_rev: int) -> np.ndarray:
     return np.asarray(counts, dtype=float) * (2.0 * np.pi / counts_per_rev)
 
 
-def lift(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, m: int):
-    """Lifted ("block") matrices of a discrete linear system over ``m`` samples.
-
-    For ``x[k+1] = A x[k] + B u[k]`` and ``y[k] = C x[k] + D u[k]`` with a scalar
-    input, a block of ``m`` inputs ``u`` gives ``y = O @ x0 + T @ u`` and
-    ``x_m = Am @ x0 + R @ u``: a whole control tick of a filter in two matrix
-    products instead of a per-sample loop. Its size grows with ``m`` squared: for one
-    control tick only (``switched-notch`` advances its warm bank tick by tick with it).
-
-    Parameters
-    ----------
-    A, B, C, D
-        State matrix (n, n), input vector (n,), output matrix (p, n) or (n,), and
-        feedthrough (p,) or scalar.
-    m
-        Samples per block.
-
-    Returns
-    -------
-    O, T, Am, R
-        ``O`` (p*m, n) and ``T`` (p*m, m) with the rows of output ``i`` at
-        ``i*m:(i+1)*m``; ``Am`` (n, n); ``R`` (n, m).
-    """
-    A = np.atleast_2d(np.asarray(A, dtype=float))
-    B = np.asarray(B, dtype=float).reshape(-1)
-    C = np.atleast_2d(np.asarray(C, dtype=float))
-    D = np.asarray(D, dtype=float).reshape(-1)
-    n, p = A.shape[0], C.shape[0]
-    powers = [np.eye(n)]
-    for _ in range(m):
-        powers.append(A @ powers[-1])
-    markov = np.array([C @ powers[k] @ B for k in range(m)])      # (m, p): C A^k B
-    O = np.empty((p, m, n))
-    T = np.zeros((p, m, m))
-    for k in range(m):
-        O[:, k, :] = C @ powers[k]
-        T[:, k, k] = D
-        for j in range(k):
-            T[:, k, j] = markov[k - 1 - j]
-    R = np.column_stack([powers[m - 1 - j] @ B for j in range(m)]) if m else np.zeros((n, 0))
-    return O.reshape(p * m, n), T.reshape(p * m, m), powers[m], R
-
-
 def steady_state(A: np.ndarray, B: np.ndarray, u0: float) -> np.ndarray:
     """State of ``x[k+1] = A x + B u`` held at the constant input ``u0`` for ever.
 

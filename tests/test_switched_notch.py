@@ -150,8 +150,8 @@ def test_block_size_does_not_change_the_estimate():
     np.testing.assert_allclose(y53, y20, atol=1e-7)
 
 
-def test_lifted_bank_matches_sample_by_sample_filtering():
-    """The active band's output is the same as running its notches with lfilter."""
+def test_bank_matches_lfilter_of_the_active_band():
+    """The active band's output (from its modes) equals running its notches with lfilter."""
     log, _, _ = _ripple_log([6.0, 6.0], 0.5)
     method = SwitchedNotch(min_speed=0.5)
     method.fit(log)

@@ -13,7 +13,9 @@ the row's simulations from the seed (the simulator is deterministic, so the accu
 columns are bit for bit those of a local run) and runs the row with
 :func:`rippleb.executors.run_task`, i.e. with the local run's own pool: the method's fit and
 steps run in their own isolated process (session, PID namespace, memory limit, timeout),
-never see the truth, and a crash is the row's status. Scoring happens in the task's
+never see the truth, and a crash is the row's status. As locally, those processes are
+forked by a fork server (:mod:`rippleb.forkserver`), one per worker process, started
+before the worker's first row, so no row's memory holds a truth the worker keeps. Scoring happens in the task's
 process (rippleb's code). Simulations and fits are kept per worker process in a private
 temporary directory (:data:`MEMO_CASES` cases at most), so the rows of one case that land
 on one worker simulate it once.
@@ -103,10 +105,16 @@ def warm_workers(client) -> None:
     only in the processes that run it. A worker that joins later loads them with its
     first row, as before.
     """
-    client.run(_warm)
+    client.run(_warm, openblas_threads())
 
 
-def _warm() -> None:
+def _warm(blas_threads: int | None = None) -> None:
+    _load_modules()
+    _enter_row(blas_threads)  # start this worker's fork server now, from its main thread
+    _leave_row()
+
+
+def _load_modules() -> None:
     import rippleb.metrics  # noqa: F401 - loaded for the forks to inherit
     import rippleb.simulator.simulation  # noqa: F401 - with the joint's compiled kernels
 
@@ -228,6 +236,9 @@ def _one_line(exc: BaseException) -> str:
 _memo_lock = threading.Lock()
 _memo: collections.OrderedDict = collections.OrderedDict()
 _memo_root: list = []
+_rows = threading.Condition()   # guards the fork server and the count of rows running
+_server: list = []              # this worker process's fork server, once started
+_running = [0]                  # rows running in this process
 
 
 def remote_row(task, blas_threads: int | None = None) -> dict:
@@ -236,8 +247,8 @@ def remote_row(task, blas_threads: int | None = None) -> dict:
     ``blas_threads`` is the client's OpenBLAS thread count: dask's nanny starts workers
     with ``OPENBLAS_NUM_THREADS=1`` (``distributed.nanny.pre-spawn-environ``), and a BLAS
     call split over another number of threads sums in another order, so a method using
-    BLAS would differ from a local run in its last bits. The worker takes the client's
-    count (the row's forked processes inherit it).
+    BLAS would differ from a local run in its last bits. The worker's fork server is started
+    with the client's count, and the row's processes inherit it.
 
     :class:`rippleb.pool.Pool` starts each job with ``os.fork``, not ``multiprocessing``:
     a dask worker process is *daemonic* (its nanny starts it with ``daemon=True``) and
@@ -249,17 +260,60 @@ def remote_row(task, blas_threads: int | None = None) -> dict:
     """
     from rippleb.executors import run_task
 
-    if blas_threads:
-        openblas_threads(blas_threads)
-    cache = _task_dir()
-    with _memo_lock:
-        memo = dict(_memo)
+    server = _enter_row(blas_threads)
     try:
-        fields = run_task(task, cache, _registry(), memo)
-    finally:
+        cache = _task_dir()
         with _memo_lock:
-            _remember(memo)
-    return fields
+            memo = dict(_memo)
+        try:
+            return run_task(task, cache, _registry(), memo, server=server)
+        finally:
+            with _memo_lock:
+                _remember(memo)
+    finally:
+        _leave_row()
+
+
+def _enter_row(blas_threads: int | None = None):
+    """Count a row as running here; the fork server its jobs are forked from.
+
+    The server must never inherit a truth: it is started (or, if it died or runs another
+    BLAS thread count, started again) only while no row runs in this process, after the
+    memo's simulations are dropped. Its jobs inherit its BLAS thread count, the client's.
+    """
+    from rippleb.forkserver import ForkServer
+
+    with _rows:
+        while not (_server and _server[0].alive() and _server[1] == blas_threads):
+            if _running[0] == 0:
+                if _server:  # it died or has the wrong count: let it go
+                    _server[0].close()
+                if blas_threads:
+                    openblas_threads(blas_threads)
+                _forget_memo()
+                _server[:] = [ForkServer.start(_registry(), preload=_load_modules), blas_threads]
+                break
+            _rows.wait()   # rows still running here hold truths: start it after them
+        _running[0] += 1
+        return _server[0]
+
+
+def _leave_row() -> None:
+    with _rows:
+        _running[0] -= 1
+        _rows.notify_all()
+
+
+def _forget_memo() -> None:
+    """Drop every simulation and fit the memo keeps (and their files)."""
+    import os
+
+    with _memo_lock:
+        for value in _memo.values():
+            path = value[0].path if isinstance(value, tuple) else value["fitted"]["path"]
+            with contextlib.suppress(OSError):
+                os.unlink(path)
+        _memo.clear()
 
 
 @functools.lru_cache(maxsize=1)

@@ -45,7 +45,7 @@ def _sim_key(case: Case) -> tuple:
     return case.scenario, case.content, case.condition, case.seed
 
 
-def run_task(task: RowTask, cache: Path, registry, memo: dict | None = None) -> dict:
+def run_task(task: RowTask, cache: Path, registry, memo: dict | None = None, server=None) -> dict:
     """Run one row here, exactly as a local run does (same scheduler, pool, isolation,
     limits and scoring); the truth stays in this process.
 
@@ -61,6 +61,9 @@ def run_task(task: RowTask, cache: Path, registry, memo: dict | None = None) -> 
         Simulations and fits of earlier rows in this process, read and filled:
         ``Case -> (artefact, truth, lengths, verified visible log)`` and ``Fit -> fit info``; an entry is used
         only while its file exists (and files are checked by hash when read).
+    server
+        The :class:`rippleb.forkserver.ForkServer` that forks the row's jobs (one started
+        before this process held any truth); None forks them from this process.
 
     Returns
     -------
@@ -81,7 +84,7 @@ def run_task(task: RowTask, cache: Path, registry, memo: dict | None = None) -> 
     state.open_rows[case] += 1  # keep the truth after the row is recorded, for the memo
     memo = {} if memo is None else memo
     _restore(state, memo)
-    schedule(Pool(1, task.memory_mb, context=registry), state, _NoBar())
+    schedule(Pool(1, task.memory_mb, context=registry, server=server), state, _NoBar())
     for c in (case, cal_case):
         if c in state.artefacts and (c.role == FITTING or c in state.truths):
             memo[c] = (state.artefacts[c], state.truths.get(c), state.lengths.get(c), state.logs.get(c))

@@ -30,6 +30,7 @@ import signal
 import socket
 import struct
 import sys
+import threading
 
 from rippleb import isolation
 
@@ -46,6 +47,7 @@ class ForkServer:
     def __init__(self, sock: socket.socket, pid: int):
         self.sock = sock
         self.pid = pid
+        self._lock = threading.Lock()  # one request at a time (a Dask worker has threads)
 
     @classmethod
     def start(cls, context, preload=None) -> "ForkServer":
@@ -72,15 +74,29 @@ class ForkServer:
         """Have the server fork a keeper for ``job`` writing to the given pipe ends;
         returns the keeper's PID (not a child of this process: the server reaps it)."""
         payload = pickle.dumps((job, memory_mb, output), protocol=pickle.HIGHEST_PROTOCOL)
-        socket.send_fds(self.sock, [_LENGTH.pack(len(payload))], [result_w, ctrl_w])
-        self.sock.sendall(payload)
-        return _PID.unpack(_recv_exact(self.sock, _PID.size))[0]
+        with self._lock:
+            socket.send_fds(self.sock, [_LENGTH.pack(len(payload))], [result_w, ctrl_w])
+            self.sock.sendall(payload)
+            return _PID.unpack(_recv_exact(self.sock, _PID.size))[0]
+
+    def alive(self) -> bool:
+        """True while the server runs (it is this process's child)."""
+        if self.sock.fileno() < 0:
+            return False
+        try:
+            pid, _ = os.waitpid(self.pid, os.WNOHANG)
+        except ChildProcessError:
+            return False
+        return pid == 0
 
     def close(self) -> None:
         """Let the server exit (it reaps its keepers first) and reap it."""
         if self.sock.fileno() >= 0:
             self.sock.close()
-            os.waitpid(self.pid, 0)
+            try:
+                os.waitpid(self.pid, 0)
+            except ChildProcessError:  # reaped already (see alive)
+                pass
 
     def __enter__(self) -> "ForkServer":
         return self

@@ -73,9 +73,11 @@ class Cluster:
             _stop(proc)
 
 
-@pytest.fixture
-def cluster(tmp_path):
-    c = Cluster(tmp_path)
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory):
+    """One cluster for the module (starting one takes seconds); the test that kills a
+    worker comes last."""
+    c = Cluster(tmp_path_factory.mktemp("cluster"))
     try:
         c.wait_for_workers(2)
         yield c
@@ -150,14 +152,7 @@ def test_a_worker_killed_mid_run_loses_no_row(cluster, tmp_path):
     assert len(lost) < len(frame)
     # the worker was really lost while the run went on
     assert cluster.workers[0].poll() is not None
-    assert "Remove worker" in (tmp_path / "scheduler.log").read_text()
+    assert "Remove worker" in (cluster.tmp / "scheduler.log").read_text()
 
-
-def test_executor_dask_starts_and_closes_its_own_local_cluster(tmp_path):
-    common = ["--methods", "raw,angle-adaptive", "--scenarios", "stop-restart", "--seeds", "1", "--no-progress"]
-    remote = rippleb("run", *common, "--executor", "dask", "--jobs", "2", "--out", tmp_path / "remote")
-    assert remote.returncode == 0, remote.stderr
-    assert "Traceback" not in remote.stderr
-    local = rippleb("run", *common, "--jobs", "1", "--out", tmp_path / "local")
-    assert local.returncode == 0, local.stderr
-    _same_accuracy(_read(tmp_path / "remote"), _read(tmp_path / "local"))
+# ``--executor dask`` (a local cluster the run starts and closes) is tested with a hostile
+# plugin in tests/test_integrity.py (test_dask_rows_cannot_find_the_truth_either).

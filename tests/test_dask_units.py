@@ -95,3 +95,30 @@ def test_run_sweep_rows_have_a_column_per_parameter_and_distinct_keys():
     assert list(frame["joint.counts_per_rev"]) == [500, 2500]
     assert frame["scenario_sha256"].nunique() == 2
     assert isinstance(frame, pd.DataFrame) and (frame["status"] == "ok").all()
+
+
+def test_a_worker_restarts_a_dead_fork_server_only_without_truths(monkeypatch):
+    """The worker's fork server is started before its first row; one that died is started
+    again only when no row runs here, and the memo (with its truths) is dropped first."""
+    import os
+    import signal
+
+    from rippleb import dask_executor as dx
+
+    monkeypatch.setattr(dx, "_server", [])
+    monkeypatch.setattr(dx, "_running", [0])
+    monkeypatch.setattr(dx, "_memo", dx.collections.OrderedDict())
+    first = dx._enter_row()
+    dx._leave_row()
+    assert dx._enter_row() is first          # alive: the same server
+    dx._leave_row()
+    dx._memo["case"] = (SimpleNamespace(path="/nonexistent"), "a truth", None, None)
+    os.kill(first.pid, signal.SIGKILL)
+    os.waitpid(first.pid, 0)
+    try:
+        second = dx._enter_row()
+        assert second is not first and second.alive()
+        assert not dx._memo                  # what it could have inherited is gone
+    finally:
+        dx._leave_row()
+        dx._server[0].close()

@@ -372,3 +372,23 @@ def test_a_job_that_signals_its_group_cannot_kill_its_keeper(monkeypatch, namesp
             finished = pool.wait()
         outcomes.append((finished[0].kind, finished[0].value))
     assert outcomes == [expected] * 5
+
+
+def test_dask_rows_cannot_find_the_truth_either(site, tmp_path):
+    """``--executor dask`` starts a local cluster and closes it; on its workers the rows'
+    processes are forked by each worker's fork server, started before its first row, so the
+    worker's memo of simulations (truths included) is not theirs, and the rows equal a local run's."""
+    common = ["--scenarios", "stop-restart", "--seeds", "1", "--no-progress"]
+    proc = rippleb(site, "run", "--methods", "rummager,raw,angle-adaptive", *common, "--executor", "dask",
+                   "--jobs", "2", "--out", tmp_path / "dask", tmp=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr
+    rows = pd.read_csv(tmp_path / "dask" / "results.csv").set_index("method")
+    assert (rows.status == "ok").all(), rows.message.to_dict()   # the rummager found no truth
+    local = rippleb(site, "run", "--methods", "raw,angle-adaptive", *common, "--jobs", "1",
+                    "--out", tmp_path / "local", tmp=tmp_path)
+    assert local.returncode == 0, local.stderr
+    reference = pd.read_csv(tmp_path / "local" / "results.csv").set_index("method")
+    columns = ["rms_error_nm", "max_error_nm", "restart_max_error_nm", "stopped_rms_error_nm"]
+    pd.testing.assert_frame_equal(rows.loc[["raw", "angle-adaptive"], columns],
+                                  reference.loc[["raw", "angle-adaptive"], columns], check_exact=True)

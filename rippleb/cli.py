@@ -191,7 +191,6 @@ LIST_WIDTH = 100
 
 def cmd_list(args) -> int:
     """``rippleb list``."""
-    from rippleb.errors import PluginError
     from rippleb.registry import Registry
     from rippleb.scenario import builtin_scenarios, load_scenario
     from rippleb.simulator.conditions import CONDITIONS
@@ -202,14 +201,13 @@ def cmd_list(args) -> int:
     print("methods:")
     for name in registry.names():
         entry = registry.entries[name]
-        if entry.origin == "builtin":  # rippleb's own code: imported here, not probed
-            with contextlib.suppress(PluginError):
-                entry.load()
         error = entry.error or errors.get(name)
         if error:
             print(f"  {name:<28} {'broken':<10} {entry.source}  {error}")
             continue
-        about = first_line(entry.cls.__doc__) if entry.cls is not None else docs.get(name, "")
+        # a built-in's docstring is read from its source: importing every method family
+        # (numba kernels compiled on a fresh install) would make `list` take seconds
+        about = first_line(entry.doc) if entry.origin == "builtin" else docs.get(name, "")
         print(_fit(f"  {name:<28} {entry.origin:<10} {about or entry.source}"))
     for module, error in sorted(registry.broken_modules.items()):
         print(f"  {'?':<28} {'broken':<8} {module}  {error}")

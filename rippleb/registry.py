@@ -50,7 +50,8 @@ class Entry:
     """One method the registry knows about.
 
     ``origin`` is ``builtin`` or ``plugin``; ``source`` the module (built-in) or
-    ``distribution: module:attr`` (plugin); ``error`` the import error of a broken entry.
+    ``distribution: module:attr`` (plugin); ``error`` the import error of a broken entry;
+    ``doc`` the class docstring of a built-in, read from its source (no import needed).
     """
 
     name: str
@@ -58,6 +59,7 @@ class Entry:
     source: str
     cls: type | None = None
     error: str | None = None
+    doc: str | None = None
     _entry_point: object = field(default=None, repr=False)
 
     @property
@@ -174,18 +176,18 @@ def _builtin_entries() -> tuple[dict[str, Entry], dict[str, str]]:
         except (OSError, SyntaxError, ValueError) as exc:
             broken[module_name] = one_line(exc)
             continue
-        for name, class_name in found:
+        for name, class_name, doc in found:
             if name in entries:
                 raise PluginError(f"two methods are named {name!r}: "
                                   f"{entries[name].source} and {module_name}")
             point = importlib.metadata.EntryPoint(name, f"{module_name}:{class_name}", GROUP)
-            entries[name] = Entry(name, "builtin", module_name, _entry_point=point)
+            entries[name] = Entry(name, "builtin", module_name, doc=doc, _entry_point=point)
     return entries, broken
 
 
-def _method_classes(path: str) -> list[tuple[str, str]]:
-    """``(method name, class name)`` of every top-level class of the module at ``path``
-    that sets ``name = "..."`` in its body."""
+def _method_classes(path: str) -> list[tuple[str, str, str | None]]:
+    """``(method name, class name, class docstring)`` of every top-level class of the
+    module at ``path`` that sets ``name = "..."`` in its body."""
     tree = ast.parse(Path(path).read_text(encoding="utf-8"), filename=path)
     found = []
     for node in tree.body:
@@ -196,7 +198,7 @@ def _method_classes(path: str) -> list[tuple[str, str]]:
                     and isinstance(statement.targets[0], ast.Name) and statement.targets[0].id == "name"
                     and isinstance(statement.value, ast.Constant) and isinstance(statement.value.value, str)
                     and statement.value.value):
-                found.append((statement.value.value, node.name))
+                found.append((statement.value.value, node.name, ast.get_docstring(node)))
     return found
 
 

@@ -25,6 +25,10 @@ def pytest_addoption(parser):
 
 def pytest_collection_modifyitems(config, items):
     if config.getoption("--full") or config.option.markexpr:
+        # The slow tests first (stable: files keep their order): xdist hands out single
+        # tests in collection order, so a slow test collected late would run alone at
+        # the end while the other worker idles.
+        items.sort(key=lambda item: item.get_closest_marker("slow") is None)
         return  # the full suite, or the marks the caller chose
     slow = [item for item in items if item.get_closest_marker("slow")]
     if slow:

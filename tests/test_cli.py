@@ -42,6 +42,17 @@ def test_list_shows_methods_and_scenarios():
     assert max(len(line) for line in proc.stdout.splitlines()) <= 100
 
 
+def test_list_imports_no_builtin_method():
+    """Descriptions come from the methods' source: on a fresh install, importing them would
+    compile every numba kernel first (about 15 s)."""
+    code = ("import sys, contextlib, io\nfrom rippleb.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()): main(['list'])\n"
+            "print(sorted(m for m in sys.modules if m.startswith('rippleb.methods.')))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "[]"
+
+
 @pytest.mark.parametrize("args, message", [
     (["run", "--methods", "rwa"], "unknown method 'rwa' (did you mean 'raw'?)"),
     (["run", "--methods", "raw", "--scenarios", "paper-quintc"], "did you mean paper-quintic"),
@@ -101,11 +112,12 @@ def test_bad_recorded_log_names_the_column(tmp_path):
 @pytest.mark.slow
 def test_sigint_then_resume(tmp_path):
     out = tmp_path / "run"
-    args = [sys.executable, "-m", "rippleb", "run", "--methods", "raw,lowpass", "--scenarios",
-            "paper-quintic,creep,reversal", "--seeds", "8", "--jobs", "1", "--out", str(out),
+    args = [sys.executable, "-m", "rippleb", "run", "--methods", "raw,lowpass,current-based,order-tracking",
+            "--scenarios", "paper-quintic,creep,reversal", "--seeds", "4", "--jobs", "1", "--out", str(out),
             "--no-progress"]
     # 48 rows of about 0.15 s: enough that the interrupt lands mid-run, not after the last
-    # row (a run of 18 rows sometimes finished before the signal came).
+    # row (a run of 18 rows sometimes finished before the signal came); four methods per
+    # case, so the run simulates 16 cases rather than 32.
     # Ctrl-C as in a terminal: a child of a background process (a pytest-xdist worker)
     # inherits SIGINT ignored, and Python keeps it ignored.
     proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -121,7 +133,7 @@ def test_sigint_then_resume(tmp_path):
     kept = pd.read_csv(out / "results.csv")
     assert 2 <= len(kept) < 48 and (kept.status == "ok").all()
 
-    resumed = rippleb("run", "--resume", out, "--no-progress")
+    resumed = rippleb("run", "--resume", out, "--jobs", "2", "--no-progress")
     assert resumed.returncode == 0, resumed.stderr
     rows = pd.read_csv(out / "results.csv")
     assert len(rows) == 48 and not rows.duplicated(["method", "scenario", "seed"]).any()

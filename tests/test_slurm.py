@@ -73,7 +73,7 @@ def test_the_documented_slurm_cluster_runs_rows_equal_to_a_local_run(tmp_path):
         assert "#SBATCH -p debug" in script and "#SBATCH -t 00:20:00" in script
         assert "--nthreads 1" in script and "--nworkers 2" in script
 
-        common = ["--methods", "raw,angle-adaptive", "--scenarios", "stop-restart", "--seeds", "2", "--no-progress"]
+        common = ["--methods", "raw,angle-adaptive", "--scenarios", "stop-restart", "--seeds", "1", "--no-progress"]
         remote = rippleb("run", *common, "--scheduler", address, "--out", tmp_path / "remote")
         assert remote.returncode == 0, remote.stderr
         local = rippleb("run", *common, "--jobs", "2", "--out", tmp_path / "local")

@@ -164,6 +164,7 @@ def test_non_editable_install_lists_builtins(tmp_path):
         assert state == [head.stdout.strip(), "build"]
 
 
+@pytest.mark.slow
 def test_run_on_a_log_without_calibration_warns_what_is_true(tmp_path):
     n = 4000
     t = np.arange(n) / 20000.0

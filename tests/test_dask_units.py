@@ -21,6 +21,7 @@ def _task(method, seed, run_id="t"):
                    load_scenario("calibration"), 120.0, 4096.0, run_id)
 
 
+@pytest.mark.slow
 def test_a_task_is_the_local_row_and_reuses_its_cases(tmp_path):
     local = run("raw,lowpass", "stop-restart", [3], jobs=1)
     memo, registry = {}, Registry.discover()
@@ -40,6 +41,7 @@ def test_a_task_is_the_local_row_and_reuses_its_cases(tmp_path):
     assert any((tmp_path / "a").glob("case-*"))
 
 
+@pytest.mark.slow
 def test_a_task_whose_memo_files_vanished_simulates_again(tmp_path):
     memo, registry = {}, Registry.discover()
     (tmp_path / "a").mkdir()
@@ -88,6 +90,7 @@ def test_openblas_threads_can_be_set_and_read_back():
         assert openblas_threads(before) == before
 
 
+@pytest.mark.slow
 def test_run_sweep_rows_have_a_column_per_parameter_and_distinct_keys():
     from rippleb.sweep import run_sweep
 

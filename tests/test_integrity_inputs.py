@@ -285,6 +285,7 @@ def _results_for_report(tmp_path):
     return tmp_path / "run" / "results.csv"
 
 
+@pytest.mark.slow
 def test_report_ignores_duplicated_and_unreadable_rows_with_one_warning(fake, tmp_path):
     path = _results_for_report(tmp_path)
     frame = pd.read_csv(path)

@@ -182,6 +182,7 @@ def test_kf_step_is_the_kalman_equations():
     np.testing.assert_allclose(P, (np.eye(n) - np.outer(K, h)) @ Pp, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_conforms_to_the_runner_contract():
     testing = pytest.importorskip("rippleb.testing")
     testing.check_method(KalmanRipple)

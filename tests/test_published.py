@@ -49,6 +49,7 @@ def _rerun(tmp_path) -> pd.DataFrame:
 
 
 # Not marked slow (about 10 s): this is the check that keeps results/ honest.
+@pytest.mark.slow
 def test_published_rows_are_reproduced_exactly(tmp_path):
     published = _published()
     problems = report.compare_rows(published, _rerun(tmp_path))

@@ -65,6 +65,7 @@ def test_reference_error_on_paper_quintic_has_the_documented_size():
     assert max(peak) == pytest.approx(3.088, abs=0.01)
 
 
+@pytest.mark.slow
 def test_reference_model_error_matches_the_spread_it_comes_from():
     """The model part of the error is linear in the relative errors, so its RMS over many
     robots follows from each link's sensitivity and the two spreads (0.45 Nm here)."""

@@ -159,6 +159,7 @@ def test_metrics_and_provenance_of_an_ok_row(fake, tmp_path):
     assert frame.set_index("method").loc["raw"].rms_error_nm > 10 * row.rms_error_nm
 
 
+@pytest.mark.slow
 def test_each_simulation_runs_once_per_run(fake, tmp_path, monkeypatch):
     calls = tmp_path / "calls"
 

@@ -23,6 +23,19 @@ def pytest_addoption(parser):
                      help="also run the tests marked slow (the full suite, as CI runs it)")
 
 
+def pytest_configure(config):
+    """With --full, compile rippleb's numba kernels once, in the controller, before any
+    worker starts: on a fresh checkout every process that imports them would compile them
+    itself (about 15 s each), and the slow tests that run first start many such processes
+    at once. Later processes load them from numba's on-disk cache."""
+    if config.getoption("--full") and not hasattr(config, "workerinput"):
+        import rippleb.metrics  # noqa: F401
+        import rippleb.simulator.simulation  # noqa: F401
+        from rippleb.registry import Registry
+
+        Registry.discover().load_builtins()
+
+
 def pytest_collection_modifyitems(config, items):
     if config.getoption("--full") or config.option.markexpr:
         # The slow tests first (stable: files keep their order): xdist hands out single

@@ -195,8 +195,11 @@ def rippleb(site, *args, tmp, timeout=600):
                           text=True, env=_env(site, tmp), timeout=timeout)
 
 
-def _spawned() -> list[int]:
-    """Live processes the spawner started (``sleep 987`` / ``sleep 988``), seen from here."""
+def _spawned(seconds=("987", "988")) -> list[int]:
+    """Live ``sleep`` processes of the given arguments, seen from here: the hostile spawner
+    starts ``sleep 987`` and ``sleep 988``; ``Spawns`` (which may run at the same time on the
+    other test worker) other numbers, so neither test sees the other's."""
+    wanted = {b"sleep\0" + s.encode() + b"\0" for s in seconds}
     found = []
     for entry in os.listdir("/proc"):
         try:
@@ -206,7 +209,7 @@ def _spawned() -> list[int]:
                 state = fh.read().rsplit(")", 1)[1].split()[0]
         except OSError:
             continue
-        if cmdline in (b"sleep\0" + b"987\0", b"sleep\0" + b"988\0") and state != "Z":
+        if cmdline in wanted and state != "Z":
             found.append(int(entry))
     return found
 
@@ -302,10 +305,10 @@ SPAWNS = textwrap.dedent('''
     class Spawns(Method):
         name = "spawns"
         def fit(self, calibration):
-            subprocess.Popen(["sleep", "987"], start_new_session=True)
+            subprocess.Popen(["sleep", "977"], start_new_session=True)
             if os.fork() == 0:
                 os.setsid()
-                os.execvp("sleep", ["sleep", "988"])
+                os.execvp("sleep", ["sleep", "978"])
             time.sleep(0.2)
         def step(self, block):
             return np.zeros(len(block))
@@ -330,7 +333,7 @@ def test_no_process_outlives_its_row(tmp_path, monkeypatch, namespaces, register
     frame = rippleb.run(methods="spawns", scenarios="static-contact", seeds=1)
     assert list(frame.status) == ["ok"], frame.message.tolist()
     time.sleep(0.3)
-    assert _spawned() == []
+    assert _spawned(("977", "978")) == []
 
 
 def _signals_its_group_and_parent():

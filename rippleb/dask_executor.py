@@ -114,6 +114,38 @@ def _warm(blas_threads: int | None = None) -> None:
     _leave_row()
 
 
+def _prepare_server() -> None:
+    """In the fork server: the heap as a process started without Dask's nanny has it, and
+    the modules every row needs."""
+    _default_malloc()
+    _load_modules()
+
+
+def _default_malloc() -> None:
+    """Undo, for the rows' processes, the ``MALLOC_TRIM_THRESHOLD_`` that Dask's nanny puts
+    in its workers' environment (``distributed.nanny.pre-spawn-environ``).
+
+    Setting it fixes glibc's mmap threshold at 128 KiB, so every array of a log's length
+    (hundreds of kB) is mapped, faulted in page by page and unmapped again, where a local
+    run's processes keep reusing their heap (glibc raises the threshold up to 32 MiB as
+    large blocks are freed). The rows get the ceiling of that default behaviour.
+    """
+    import ctypes
+    import ctypes.util
+    import os
+
+    if "MALLOC_TRIM_THRESHOLD_" not in os.environ:
+        return
+    del os.environ["MALLOC_TRIM_THRESHOLD_"]
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        m_trim_threshold, m_mmap_threshold = -1, -3      # <malloc.h>
+        libc.mallopt(m_mmap_threshold, 32 << 20)
+        libc.mallopt(m_trim_threshold, 64 << 20)
+    except (OSError, AttributeError):
+        pass  # not glibc: nothing to undo
+
+
 def _load_modules() -> None:
     import rippleb.metrics  # noqa: F401 - loaded for the forks to inherit
     import rippleb.simulator.simulation  # noqa: F401 - with the joint's compiled kernels
@@ -291,7 +323,7 @@ def _enter_row(blas_threads: int | None = None):
                 if blas_threads:
                     openblas_threads(blas_threads)
                 _forget_memo()
-                _server[:] = [ForkServer.start(_registry(), preload=_load_modules), blas_threads]
+                _server[:] = [ForkServer.start(_registry(), preload=_prepare_server), blas_threads]
                 break
             _rows.wait()   # rows still running here hold truths: start it after them
         _running[0] += 1

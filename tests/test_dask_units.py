@@ -1,6 +1,7 @@
 """The pieces of the Dask executor that need no cluster: a row as a self-contained task, the
 worker's memo, lost workers as statuses, and the BLAS thread count."""
 
+import os
 from types import SimpleNamespace
 
 import pandas as pd
@@ -125,3 +126,29 @@ def test_a_worker_restarts_a_dead_fork_server_only_without_truths(monkeypatch):
     finally:
         dx._leave_row()
         dx._server[0].close()
+
+
+def test_rows_on_a_dask_worker_reuse_their_heap_like_local_rows():
+    """Dask's nanny starts workers with MALLOC_TRIM_THRESHOLD_ set, which makes glibc map and
+    unmap every log-sized array; the worker's fork server undoes it for the rows it forks."""
+    import subprocess
+    import sys
+
+    code = ("import os, resource, numpy as np\n"
+            "from rippleb.dask_executor import _default_malloc\n"
+            "if os.environ.get('UNDO'): _default_malloc()\n"
+            "a = np.ones(100_000); del a\n"
+            "before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt\n"
+            "for _ in range(200):\n"
+            "    a = np.ones(100_000); del a\n"
+            "print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)\n")
+
+    def page_faults(**env):
+        proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                              env={**os.environ, "MALLOC_TRIM_THRESHOLD_": "65536", **env})
+        assert proc.returncode == 0, proc.stderr
+        return int(proc.stdout)
+
+    nanny, undone = page_faults(), page_faults(UNDO="1")
+    assert nanny > 10_000          # 800 kB mapped and faulted in 200 times
+    assert undone < nanny / 20

@@ -246,8 +246,9 @@ class SwitchedNotch(Method):
             self._start(u[0], int(counts[0]))
         y = np.empty_like(u)
         notch_stream(u, counts, y, self.x0_, self.x1_, self.decay_, self.turn_, self.c0_,
-                     self.c1_, self.d_, self.centres_, self.marks_, self.at_, float(self.hysteresis), int(self.spec_.block_size),
-                     float(self.spec_.fs), float(self.spec_.counts_per_rev))
+                     self.c1_, self.d_, self.centres_, self.marks_, self.at_,
+                     float(self.hysteresis), int(self.spec_.block_size), float(self.spec_.fs),
+                     float(self.spec_.counts_per_rev))
         return self.gain_ * y + self.offset_
 
     def _start(self, u0: float, count0: int) -> None:
@@ -277,7 +278,7 @@ def normal_modes(A, B, C, D):
     """
     v = modal_basis(A)
     to_modal = np.linalg.inv(v)
-    blocks, b, c = to_modal @ A @ v, to_modal @ B, C[0] @ v
+    b, c = to_modal @ B, C[0] @ v
     n = A.shape[0]
     for k in range(0, n, 2):
         bk = np.hypot(b[k], b[k + 1])

@@ -15,8 +15,8 @@ columns are bit for bit those of a local run) and runs the row with
 steps run in their own isolated process (session, PID namespace, memory limit, timeout),
 never see the truth, and a crash is the row's status. As locally, those processes are
 forked by a fork server (:mod:`rippleb.forkserver`), one per worker process, started
-before the worker's first row, so no row's memory holds a truth the worker keeps. Scoring happens in the task's
-process (rippleb's code). Simulations and fits are kept per worker process in a private
+before the worker's first row, so no row's memory holds a truth the worker keeps.
+Scoring happens in the task's process (rippleb's code). Simulations and fits are kept per worker process in a private
 temporary directory (:data:`MEMO_CASES` cases at most), so the rows of one case that land
 on one worker simulate it once.
 
@@ -95,15 +95,15 @@ class DaskExecutor:
 
 
 def warm_workers(client) -> None:
-    """Have each worker of the cluster load what a row's processes need before its first row.
+    """Have each worker of the cluster load what its rows need and start its fork server
+    before its first row.
 
-    A row's fit and steps run in processes forked from the worker (:mod:`rippleb.pool`),
-    so what the worker has loaded they inherit for free, and what it has not, each of
-    them loads again. The built-in methods (with their compiled kernels), the simulator
-    and the metrics are rippleb's own code, so loading them in the worker gives a
-    method's process nothing it would not have had; a plugin method is still imported
-    only in the processes that run it. A worker that joins later loads them with its
-    first row, as before.
+    A row's fit and steps run in processes forked by the worker's fork server, so what
+    the server has loaded they inherit for free, and what it has not, each of them loads
+    again. The built-in methods (with their compiled kernels), the simulator and the
+    metrics are rippleb's own code, so loading them gives a method's process nothing it
+    would not have had; a plugin method is still imported only in the processes that run
+    it. A worker that joins later does both with its first row.
     """
     client.run(_warm, openblas_threads())
 

@@ -29,11 +29,9 @@ def pytest_configure(config):
     itself (about 15 s each), and the slow tests that run first start many such processes
     at once. Later processes load them from numba's on-disk cache."""
     if config.getoption("--full") and not hasattr(config, "workerinput"):
-        import rippleb.metrics  # noqa: F401
-        import rippleb.simulator.simulation  # noqa: F401
-        from rippleb.registry import Registry
+        from rippleb.dask_executor import _load_modules  # what a Dask worker preloads
 
-        Registry.discover().load_builtins()
+        _load_modules()
 
 
 def pytest_collection_modifyitems(config, items):

@@ -4,8 +4,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from rippleb.metrics import (Truth, bandwidth_hz, delay_ms, max_error, moving_from_encoder, restart_max_error,
-                             rms_error, score, step_latency_ms, tick_stats)
+from rippleb.metrics import (Truth, _lag_correlation, bandwidth_hz, delay_ms, max_error,
+                             moving_from_encoder, restart_max_error, rms_error, score,
+                             step_latency_ms, tick_stats)
 
 FS = 20_000.0
 
@@ -234,3 +235,17 @@ def test_delay_is_nan_on_a_slow_torque_with_ripple():
     y2 = x2 + 0.6 * np.cos(2 * np.pi * 1.6 * t)
     assert delay_ms(np.concatenate([np.full(100, y2[0]), y2[:-100]]), x2, np.ones(len(t), bool),
                     FS) == pytest.approx(5.0, abs=0.1)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(4, 300), st.integers(0, 10_000), st.floats(0.0, 1.0))
+def test_lag_correlation_is_pearson_on_each_overlap(n, seed, reach):
+    """The FFT correlation (circular, of length >= n + max lag) equals the definition, lag
+    by lag, up to the largest lag, which may come within two samples of the window's end."""
+    rng = np.random.default_rng(seed)
+    x, y = np.cumsum(rng.standard_normal((2, n)), axis=1)
+    max_lag = int(reach * (n - 2))
+    r = _lag_correlation(y, x, np.ones(n, bool), 1.0, float(max_lag))
+    for lag in range(max_lag + 1):
+        expected = np.corrcoef(y[lag:], x[: n - lag])[0, 1]
+        assert r[lag] == pytest.approx(expected, abs=1e-9)

@@ -4,8 +4,8 @@ After Godler et al., whose ripple compensation uses "a set of multiple notch fil
 have partially separated cutoff frequencies" (reference [17] of the paper). The ripple of
 order ``k`` sits at ``k`` times the wave-generator rotation frequency ``f``, so it moves
 with speed. The bank holds bands whose centre speeds ``c_j`` are spaced geometrically
-from ``min_speed`` to ``max_speed`` [wave-generator rev/s], a whole number per octave; band ``j``
-is one filter, the series of second-order notches at ``k * c_j`` for every ``k`` in
+from ``min_speed`` to ``max_speed`` [wave-generator rev/s], a whole number per octave;
+band ``j`` is one filter, the series of second-order notches at ``k * c_j`` for every ``k`` in
 ``orders``, each of quality factor ``q``. Because all orders scale with the same speed
 and the notches have constant Q, the relative mistuning ``f / c_j`` is the same for every
 order, so one band index picks the active notch of every order at once.
@@ -20,9 +20,9 @@ would remove torque as much as ripple. Above the highest band the highest band s
 Every band runs all the time (kept warm), so a switch never starts a cold filter: the
 bank is kept as independent 2-state modes, one per distinct notch pole pair (a band's
 order-4 notch is the order-2 notch of the band an octave up), and one compiled loop
-advances every mode sample by sample; the active band's output is a weighted sum of its
-modes (partial fractions of its notches in series). Gain and offset come from a least-squares fit of the calibration
-strain to the known torque.
+advances every mode, two samples a step; the active band's output is a weighted sum of
+its modes (partial fractions of its notches in series). Gain and offset come from a
+least-squares fit of the calibration strain to the known torque.
 
 Examples
 --------
@@ -172,12 +172,13 @@ def select_band(speed, current, centres, hysteresis):
     return min(max(round(p), OFF), len(centres) - 1)
 
 
+#: C-contiguous arrays: contiguity lets the compiler vectorise the mode loop. ``IN_``: read-only
+#: (the bank's design), the others written in place (its state and counters).
 I8_C = types.int64[::1]
 IN_I8_C = types.Array(types.int64, 1, "C", readonly=True)
 IN_I8_2D_C = types.Array(types.int64, 2, "C", readonly=True)
-IN_F8_2D_C = types.Array(types.float64, 2, "C", readonly=True)
-#: C-contiguous read-only coefficients: contiguity lets the compiler vectorise the mode loop
 IN_F8_C = types.Array(types.float64, 1, "C", readonly=True)
+IN_F8_2D_C = types.Array(types.float64, 2, "C", readonly=True)
 #: streaming counters of :func:`notch_stream`, kept in one int64 array between calls
 BAND, PHASE, N_MARKS, OLDEST = range(4)
 
@@ -359,9 +360,9 @@ class SwitchedNotch(Method):
             self._start(u[0], int(counts[0]))
         y = np.empty_like(u)
         notch_stream(u, counts, y, self.x0_, self.x1_, self.decay_, self.turn_, self.decay2_,
-                     self.turn2_, self.band_modes_, self.c0_, self.c1_, self.d_, self.centres_, self.marks_, self.at_,
-                     float(self.hysteresis), int(self.spec_.block_size), float(self.spec_.fs),
-                     float(self.spec_.counts_per_rev))
+                     self.turn2_, self.band_modes_, self.c0_, self.c1_, self.d_, self.centres_,
+                     self.marks_, self.at_, float(self.hysteresis), int(self.spec_.block_size),
+                     float(self.spec_.fs), float(self.spec_.counts_per_rev))
         return self.gain_ * y + self.offset_
 
     def _start(self, u0: float, count0: int) -> None:

@@ -94,6 +94,13 @@ def test_orders_near_nyquist_are_dropped_not_aliased():
     assert len(poles) == 3                                     # 2, 4, 8 kHz, shared by both
 
 
+def test_a_notch_without_a_pole_pair_is_refused_by_name():
+    """A wide notch close to Nyquist has two real poles, which no 2-state rotation mode can
+    hold: the design says so instead of building a wrong bank."""
+    with pytest.raises(ValueError, match="8000 Hz with q=2.0 has real poles"):
+        notch_modes(np.array([1000.0, 2000.0]), (2, 4, 8), 2.0, 20_000.0)
+
+
 def test_selection_follows_speed_with_hysteresis():
     centres = band_centres(1.0, 8.0, 2.0)                 # 1, 2, 4, 8 rev/s: spacing x2
     edge = np.sqrt(2.0)                                  # half-way from band 0 to band 1

@@ -341,8 +341,13 @@ class SwitchedNotch(Method):
 
     def _design(self, spec: JointSpec) -> dict:
         """The bank for ``spec``: centres and the modes of :func:`notch_modes` in flat arrays."""
+        if not self.max_speed > self.min_speed > 0:
+            raise ValueError(f"switched-notch: needs 0 < min_speed < max_speed, got "
+                             f"min_speed={self.min_speed}, max_speed={self.max_speed}")
         if self.n_bands is None:
             spacing = bank_spacing(self.q, self.hysteresis)
+        elif self.n_bands < 2:
+            raise ValueError(f"switched-notch: n_bands={self.n_bands}; a bank needs at least 2 bands")
         else:
             spacing = (self.max_speed / self.min_speed) ** (1.0 / (self.n_bands - 1))
         centres = band_centres(self.min_speed, self.max_speed, spacing)

@@ -101,6 +101,13 @@ def test_a_notch_without_a_pole_pair_is_refused_by_name():
         notch_modes(np.array([1000.0, 2000.0]), (2, 4, 8), 2.0, 20_000.0)
 
 
+def test_a_bank_without_two_bands_is_refused_by_name():
+    with pytest.raises(ValueError, match="n_bands=1; a bank needs at least 2 bands"):
+        SwitchedNotch(n_bands=1).reset(SPEC)
+    with pytest.raises(ValueError, match="min_speed=5.0, max_speed=2.0"):
+        SwitchedNotch(min_speed=5.0, max_speed=2.0).reset(SPEC)
+
+
 def test_selection_follows_speed_with_hysteresis():
     centres = band_centres(1.0, 8.0, 2.0)                 # 1, 2, 4, 8 rev/s: spacing x2
     edge = np.sqrt(2.0)                                  # half-way from band 0 to band 1

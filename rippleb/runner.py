@@ -233,16 +233,20 @@ def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, pro
         # released soon and memory stays bounded by the cases in flight, not the whole run.
         rows = sorted((k for k in plan.rows if row_key(k.fields()) not in done),
                       key=lambda k: (k.seed, k.scenario, k.extra, k.condition, k.method))
-        with tempfile.TemporaryDirectory(prefix="rippleb-cache-") as cache:
-            state = State(plan, registry, results, Path(cache), log_dir(out_dir), timeout,
-                           time.strftime("%Y%m%dT%H%M%S"), rows)
-            with progress_bar(len(rows), progress) as bar, sigterm_as_interrupt():
-                prepare_cases(state)
-                if executor is None:
-                    schedule(Pool(int(jobs), memory_mb, server=server), state, bar)
-                else:  # whole rows run elsewhere; this process only records them
-                    executor.run(row_tasks(state, memory_mb), lambda key, fields: record(state, key, bar, **fields))
-        results.flush()
+        try:
+            with tempfile.TemporaryDirectory(prefix="rippleb-cache-") as cache:
+                state = State(plan, registry, results, Path(cache), log_dir(out_dir), timeout,
+                               time.strftime("%Y%m%dT%H%M%S"), rows)
+                with progress_bar(len(rows), progress) as bar, sigterm_as_interrupt():
+                    prepare_cases(state)
+                    if executor is None:
+                        schedule(Pool(int(jobs), memory_mb, server=server), state, bar)
+                    else:  # whole rows run elsewhere; this process only records them
+                        executor.run(row_tasks(state, memory_mb),
+                                     lambda key, fields: record(state, key, bar, **fields))
+        finally:  # finished or interrupted: the file in key order, from the rows in memory
+            if results.rows:
+                results.flush()
     return results.frame()
 
 

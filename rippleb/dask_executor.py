@@ -338,14 +338,20 @@ def _leave_row() -> None:
 
 def _forget_memo() -> None:
     """Drop every simulation and fit the memo keeps (and their files)."""
+    with _memo_lock:
+        for key in list(_memo):
+            _drop(key)
+
+
+def _drop(key) -> None:
+    """Take ``key`` out of the memo and delete its file: a case's simulated log (its value
+    a tuple led by the artefact) or a fitted method (its fit info)."""
     import os
 
-    with _memo_lock:
-        for value in _memo.values():
-            path = value[0].path if isinstance(value, tuple) else value["fitted"]["path"]
-            with contextlib.suppress(OSError):
-                os.unlink(path)
-        _memo.clear()
+    value = _memo.pop(key)
+    path = value[0].path if isinstance(value, tuple) else value["fitted"]["path"]
+    with contextlib.suppress(OSError):
+        os.unlink(path)
 
 
 @functools.lru_cache(maxsize=1)
@@ -372,19 +378,14 @@ def _task_dir():
 
 def _remember(memo: dict) -> None:
     """Keep the newest :data:`MEMO_CASES` cases (and the fits on them); delete the rest's files."""
-    import os
-
     for key, value in memo.items():
         _memo[key] = value
         _memo.move_to_end(key)
     cases = [k for k in _memo if hasattr(k, "role")]
     for old in cases[:max(0, len(cases) - MEMO_CASES)]:
-        artefact = _memo.pop(old)[0]
-        with contextlib.suppress(OSError):
-            os.unlink(artefact.path)
+        _drop(old)
         for fit in [k for k in _memo if getattr(k, "calibration", None) == old]:
-            with contextlib.suppress(OSError):
-                os.unlink(_memo.pop(fit)["fitted"]["path"])
+            _drop(fit)
 
 
 def openblas_threads(set_to: int | None = None) -> int | None:

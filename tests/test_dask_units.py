@@ -104,7 +104,6 @@ def test_run_sweep_rows_have_a_column_per_parameter_and_distinct_keys():
 def test_a_worker_restarts_a_dead_fork_server_only_without_truths(monkeypatch):
     """The worker's fork server is started before its first row; one that died is started
     again only when no row runs here, and the memo (with its truths) is dropped first."""
-    import os
     import signal
 
     from rippleb import dask_executor as dx

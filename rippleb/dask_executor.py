@@ -47,6 +47,29 @@ MEMO_CASES = 16
 CONNECT_TIMEOUT_S = 10
 THREADS_REFRESH_S = 2.0
 
+#: Dask settings for rippleb's clusters. With Dask's defaults an idle scheduler, nanny and
+#: worker spend 1.8 %, 1.7 % and 2.9 % of a core on periodic callbacks (measured with psutil
+#: over 20 s, docs/scale.md), 11 % of a core for a 2-worker cluster and 37 % for a node of 8;
+#: with these, 0.3 %, 0.05 % and 0.2 %. None of them decides where, when or whether a row runs:
+#: the event-loop watchdog looks 1 time a second instead of 50 (it still warns after 3 s);
+#: the statistical profiler, which would sample a worker thread that only waits for its
+#: row's process, is off; the system monitor's dashboard metrics and the memory monitor are
+#: read every 5 s and 1 s (a row's memory is bounded by its own limit, ``rippleb.pool``).
+QUIET_CONFIG = {
+    "distributed.admin.tick.interval": "1s",
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.system-monitor.interval": "5s",
+    "distributed.worker.memory.monitor-interval": "1s",
+}
+
+
+def quiet_environment() -> dict[str, str]:
+    """:data:`QUIET_CONFIG` as the ``DASK_*`` environment variables that ``dask scheduler`` and
+    ``dask worker`` read at start (``distributed.admin.tick.interval`` becomes
+    ``DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL``)."""
+    return {"DASK_" + key.upper().replace(".", "__").replace("-", "_"): str(value)
+            for key, value in QUIET_CONFIG.items()}
+
 
 class DaskExecutor:
     """Run whole rows on a dask.distributed cluster.
@@ -76,12 +99,15 @@ class DaskExecutor:
 
     @contextlib.contextmanager
     def _client(self):
+        import dask
         from distributed import Client, LocalCluster
 
         if self.scheduler is None:
             # Errors only: a cancelled task's warnings (after Ctrl-C) are not the user's business.
-            with LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                              dashboard_address=":0", silence_logs=logging.ERROR) as cluster, \
+            # The nannies hand the configuration they were made under to their workers.
+            with dask.config.set(QUIET_CONFIG), \
+                    LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                 dashboard_address=":0", silence_logs=logging.ERROR) as cluster, \
                     Client(cluster) as client:
                 yield client
             return
@@ -115,20 +141,25 @@ def _warm(blas_threads: int | None = None) -> None:
 
 
 def _prepare_server() -> None:
-    """In the fork server: the heap as a process started without Dask's nanny has it, and
-    the modules every row needs."""
+    """In the fork server: the heap as a process started without Dask's nanny has it (the
+    worker has undone that already; a server started otherwise still needs it), and the
+    modules every row needs."""
     _default_malloc()
     _load_modules()
 
 
 def _default_malloc() -> None:
-    """Undo, for the rows' processes, the ``MALLOC_TRIM_THRESHOLD_`` that Dask's nanny puts
-    in its workers' environment (``distributed.nanny.pre-spawn-environ``).
+    """Undo, in this process and so in the rows' processes forked from it, the
+    ``MALLOC_TRIM_THRESHOLD_`` that Dask's nanny puts in its workers' environment
+    (``distributed.nanny.pre-spawn-environ``).
 
     Setting it fixes glibc's mmap threshold at 128 KiB, so every array of a log's length
     (hundreds of kB) is mapped, faulted in page by page and unmapped again, where a local
     run's processes keep reusing their heap (glibc raises the threshold up to 32 MiB as
-    large blocks are freed). The rows get the ceiling of that default behaviour.
+    large blocks are freed). That cost the rows' processes a third of their system CPU and
+    the worker, which unpacks and scores every row, more than half of its CPU per task
+    (docs/scale.md). The worker and its rows get the ceiling of glibc's default behaviour:
+    a worker keeps up to 64 MiB of freed heap instead of returning it at once.
     """
     import ctypes
     import ctypes.util
@@ -322,6 +353,7 @@ def _enter_row(blas_threads: int | None = None):
                     _server[0].close()
                 if blas_threads:
                     openblas_threads(blas_threads)
+                _default_malloc()  # before the server's fork: both unpack and score logs
                 _forget_memo()
                 _server[:] = [ForkServer.start(_registry(), preload=_prepare_server), blas_threads]
                 break

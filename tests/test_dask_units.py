@@ -129,13 +129,17 @@ def test_a_worker_restarts_a_dead_fork_server_only_without_truths(monkeypatch):
 
 def test_rows_on_a_dask_worker_reuse_their_heap_like_local_rows():
     """Dask's nanny starts workers with MALLOC_TRIM_THRESHOLD_ set, which makes glibc map and
-    unmap every log-sized array; the worker's fork server undoes it for the rows it forks."""
+    unmap every log-sized array; a worker undoes it for itself (it unpacks and scores every
+    row) before it starts the fork server its rows inherit it from."""
     import subprocess
     import sys
 
     code = ("import os, resource, numpy as np\n"
             "from rippleb.dask_executor import _default_malloc\n"
-            "if os.environ.get('UNDO'): _default_malloc()\n"
+            "import rippleb.dask_executor as dx\n"
+            "if os.environ.get('UNDO') == 'direct': _default_malloc()\n"
+            "if os.environ.get('UNDO') == 'worker':\n"
+            "    dx._enter_row(); dx._leave_row(); dx._server[0].close()\n"
             "a = np.ones(100_000); del a\n"
             "before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt\n"
             "for _ in range(200):\n"
@@ -148,6 +152,54 @@ def test_rows_on_a_dask_worker_reuse_their_heap_like_local_rows():
         assert proc.returncode == 0, proc.stderr
         return int(proc.stdout)
 
-    nanny, undone = page_faults(), page_faults(UNDO="1")
+    nanny, undone, worker = page_faults(), page_faults(UNDO="direct"), page_faults(UNDO="worker")
     assert nanny > 10_000          # 800 kB mapped and faulted in 200 times
     assert undone < nanny / 20
+    assert worker < nanny / 20     # the worker process itself, once it has entered a row
+
+
+def test_quiet_settings_reach_dask_processes_as_environment(tmp_path):
+    """``quiet_environment`` names the variables ``dask worker`` reads: a process started with
+    them sees every entry of QUIET_CONFIG."""
+    import json
+    import subprocess
+    import sys
+
+    from rippleb.dask_executor import QUIET_CONFIG, quiet_environment
+
+    code = ("import dask, distributed, json\n"
+            f"print(json.dumps({{k: dask.config.get(k) for k in {list(QUIET_CONFIG)!r}}}))\n")
+    clean = {k: v for k, v in os.environ.items() if not k.startswith("DASK_")}
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path,
+                          env={**clean, **quiet_environment()})
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout) == QUIET_CONFIG
+
+
+@pytest.mark.slow
+def test_the_local_cluster_runs_with_the_quiet_settings():
+    """``--executor dask``: the scheduler (in this process) and the workers (started by
+    nannies) run with QUIET_CONFIG, and the settings do not leak past the run."""
+    import dask
+
+    from rippleb.dask_executor import QUIET_CONFIG, DaskExecutor
+
+    with DaskExecutor(workers=1)._client() as client:
+        workers = client.run(lambda: dask.config.get("distributed.worker.profile.enabled"))
+        tick = client.run_on_scheduler(lambda dask_scheduler: dask_scheduler._tick_interval)
+        worker_tick = client.run(lambda dask_worker: dask_worker._tick_interval)
+    assert list(workers.values()) == [False]
+    assert tick == 1.0 and list(worker_tick.values()) == [1.0]
+    assert dask.config.get("distributed.admin.tick.interval") != QUIET_CONFIG["distributed.admin.tick.interval"]
+
+
+def test_the_scale_page_lists_the_quiet_settings():
+    """docs/scale.md tells users of hand-started workers what to export: exactly these."""
+    from pathlib import Path
+
+    from rippleb.dask_executor import quiet_environment
+
+    page = (Path(__file__).parents[1] / "docs" / "scale.md").read_text()
+    exported = dict(line.removeprefix("export ").split("=", 1) for line in page.splitlines()
+                    if line.startswith("export DASK_"))
+    assert exported == quiet_environment()

@@ -72,6 +72,7 @@ def test_the_documented_slurm_cluster_runs_rows_equal_to_a_local_run(tmp_path):
         script = (tmp_path / "job.sh").read_text()
         assert "#SBATCH -p debug" in script and "#SBATCH -t 00:20:00" in script
         assert "--nthreads 1" in script and "--nworkers 2" in script
+        assert "export DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL=1s" in script
 
         common = ["--methods", "raw,angle-adaptive", "--scenarios", "stop-restart", "--seeds", "1", "--no-progress"]
         remote = rippleb("run", *common, "--scheduler", address, "--out", tmp_path / "remote")

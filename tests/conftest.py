@@ -29,7 +29,7 @@ def pytest_configure(config):
     itself (about 15 s each), and the slow tests that run first start many such processes
     at once. Later processes load them from numba's on-disk cache."""
     if config.getoption("--full") and not hasattr(config, "workerinput"):
-        from rippleb.dask_executor import _load_modules  # what a Dask worker preloads
+        from rippleb.dask_worker import _load_modules  # what a Dask worker preloads
 
         _load_modules()
 

@@ -7,7 +7,8 @@ from types import SimpleNamespace
 import pandas as pd
 import pytest
 
-from rippleb.dask_executor import _fields, openblas_threads
+from rippleb.dask_executor import _fields
+from rippleb.dask_worker import openblas_threads
 from rippleb.executors import RowTask, run_task
 from rippleb.registry import Registry
 from rippleb.rows import RowKey
@@ -106,7 +107,7 @@ def test_a_worker_restarts_a_dead_fork_server_only_without_truths(monkeypatch):
     again only when no row runs here, and the memo (with its truths) is dropped first."""
     import signal
 
-    from rippleb import dask_executor as dx
+    from rippleb import dask_worker as dx
 
     monkeypatch.setattr(dx, "_server", [])
     monkeypatch.setattr(dx, "_running", [0])
@@ -135,9 +136,8 @@ def test_rows_on_a_dask_worker_reuse_their_heap_like_local_rows():
     import sys
 
     code = ("import os, resource, numpy as np\n"
-            "from rippleb.dask_executor import _default_malloc\n"
-            "import rippleb.dask_executor as dx\n"
-            "if os.environ.get('UNDO') == 'direct': _default_malloc()\n"
+            "import rippleb.dask_worker as dx\n"
+            "if os.environ.get('UNDO') == 'direct': dx._default_malloc()\n"
             "if os.environ.get('UNDO') == 'worker':\n"
             "    dx._enter_row(); dx._leave_row(); dx._server[0].close()\n"
             "a = np.ones(100_000); del a\n"

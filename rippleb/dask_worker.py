@@ -42,14 +42,6 @@ def warm(blas_threads: int | None = None) -> None:
     _leave_row()
 
 
-def _prepare_server() -> None:
-    """In the fork server: the heap as a process started without Dask's nanny has it (the
-    worker has undone that already; a server started otherwise still needs it), and the
-    modules every row needs."""
-    _default_malloc()
-    _load_modules()
-
-
 def _default_malloc() -> None:
     """Undo, in this process and so in the rows' processes forked from it, the
     ``MALLOC_TRIM_THRESHOLD_`` that Dask's nanny puts in its workers' environment
@@ -80,6 +72,7 @@ def _default_malloc() -> None:
 
 
 def _load_modules() -> None:
+    """The modules every row needs, loaded in the worker and its fork server."""
     import rippleb.metrics  # noqa: F401 - loaded for the forks to inherit
     import rippleb.simulator.simulation  # noqa: F401 - with the joint's compiled kernels
 
@@ -135,9 +128,9 @@ def _enter_row(blas_threads: int | None = None):
                     _server[0].close()
                 if blas_threads:
                     openblas_threads(blas_threads)
-                _default_malloc()  # here too: the worker unpacks and scores every row
+                _default_malloc()  # the worker scores every row; its server forks inherit it
                 _forget_memo()
-                _server[:] = [ForkServer.start(_registry(), preload=_prepare_server), blas_threads]
+                _server[:] = [ForkServer.start(_registry(), preload=_load_modules), blas_threads]
                 break
             _rows.wait()   # rows still running here hold truths: start it after them
         _running[0] += 1

@@ -26,6 +26,8 @@ import argparse
 import dataclasses
 import itertools
 
+import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
+
 import numpy as np
 
 from rippleb.methods.angle_adaptive import AngleAdaptive, rotation

@@ -6,6 +6,8 @@ the per-tick figure (total / ticks), which includes the method call itself (an e
 Python method, ~0.1 us).
 """
 
+import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
+
 import numpy as np
 import pytest
 

@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import time
 
+import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
+
 import numpy as np
 import pytest
 from scipy import signal

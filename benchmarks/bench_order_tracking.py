@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import time
 
+import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
+
 import numpy as np
 import pytest
 from scipy.signal import sosfilt, sosfilt_zi

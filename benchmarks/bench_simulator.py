@@ -10,6 +10,8 @@ machine the ratio holds where the absolute time does not.
 
 import time
 
+import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
+
 import numpy as np
 import pytest
 from scipy import signal

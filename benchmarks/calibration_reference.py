@@ -17,6 +17,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
+import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
+
 import numpy as np
 
 from condition_table import rms_error, seeds_of

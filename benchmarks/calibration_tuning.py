@@ -14,6 +14,8 @@ from __future__ import annotations
 import argparse
 import itertools
 
+import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
+
 import numpy as np
 
 from rippleb.metrics import Truth, score

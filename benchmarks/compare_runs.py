@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import sys
 
+import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
+
 import pandas as pd
 
 KEY = ["method", "scenario", "condition", "seed"]

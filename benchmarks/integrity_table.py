@@ -20,6 +20,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
+
 import numpy as np
 import pandas as pd
 

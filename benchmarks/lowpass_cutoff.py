@@ -4,6 +4,8 @@ For each cutoff, fit and run ``lowpass`` on ``calibration`` logs of seeds 0-2 an
 the RMS error against ``torque_true``. Run: ``python benchmarks/lowpass_cutoff.py``.
 """
 
+import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
+
 import numpy as np
 
 from rippleb.methods.lowpass import Lowpass

@@ -7,7 +7,13 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from rippleb._lazy import lazy_exports
+from rippleb import numerics
+
+# Before anything loads numpy: the same floating-point paths on every x86-64 CPU with AVX2,
+# so a published row re-runs to the last bit (rippleb/numerics.py, docs/reproducibility.md).
+numerics.pin()
+
+from rippleb._lazy import lazy_exports  # noqa: E402
 
 #: Where each public name lives. They are imported on first use (PEP 562), so that
 #: ``import rippleb`` and ``python -m rippleb --help`` do not pay for numba, scipy and

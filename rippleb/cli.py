@@ -317,6 +317,8 @@ def _record_run(args, provenance: dict, wall_s: float) -> None:
     ``rippleb report``; a resumed run keeps the first command and adds its own."""
     import json
 
+    from rippleb.provenance import environment_changes
+
     out_dir = getattr(args, "out_dir", None)
     if out_dir is None or not getattr(args, "started", False):
         return  # the run never started (bad arguments, a refused directory): nothing to describe
@@ -328,6 +330,11 @@ def _record_run(args, provenance: dict, wall_s: float) -> None:
         except (OSError, ValueError):
             first = {}
         first.setdefault("resumes", []).append(provenance["command"])
+        changes = environment_changes(first, provenance)
+        if changes:
+            portable = all((p.get("machine") or {}).get("numerics") == "portable" for p in (first, provenance))
+            first.setdefault("environment_changes", []).append(
+                {"command": provenance["command"], "changes": changes, "portable": portable})
         first["wall_s"] = first.get("wall_s", 0.0) + wall_s
         first["completed"] = provenance["completed"]
         provenance = first
@@ -366,6 +373,7 @@ def _run(args, start: float) -> int:
     elif args.resume is not None:
         config = runner.read_config(args.resume)
         args.out_dir = args.resume
+        _warn_other_environment(args.resume)
         seeds = config["seeds"] if args.seeds is None and args.seed_start is None \
             else (runner.DEFAULT_SEEDS if args.seeds is None else args.seeds)
         frame = runner.run(args.methods or config["methods"], args.scenarios or config["scenarios"],
@@ -391,6 +399,23 @@ def _run(args, start: float) -> int:
     print(f"Next: rippleb report {args.out_dir} (tables with intervals, figures; --html for the "
           f"interactive page)")
     return _report_broken_plugins(frame)
+
+
+def _warn_other_environment(run_dir: Path) -> None:
+    """One line when ``run_dir``'s rows were made with other versions or numeric paths."""
+    from rippleb.provenance import environment, environment_changes, read_run_provenance
+
+    try:
+        first = read_run_provenance(run_dir)
+    except InputError:
+        return  # --resume reports an unreadable run directory itself
+    if "versions" not in first:
+        return  # recorded before versions were: nothing to compare
+    changes = environment_changes(first, environment())
+    if changes:
+        print(f"rippleb: warning: {run_dir} was started with other versions or numeric paths "
+              f"({'; '.join(changes)}); the new rows may differ from the old in their last bits",
+              file=sys.stderr)
 
 
 def _report_broken_plugins(frame) -> int:

@@ -25,7 +25,8 @@ import logging
 import time
 import uuid
 
-from rippleb.dask_worker import openblas_threads, remote_row, warm
+from rippleb.dask_worker import remote_row, warm
+from rippleb.numerics import openblas_threads
 from rippleb.errors import InputError
 from rippleb.results import ENVIRONMENT
 

@@ -23,6 +23,8 @@ import tempfile
 import threading
 import uuid
 
+from rippleb.numerics import openblas_threads
+
 MEMO_CASES = 16
 
 # This worker process's state (one per process, shared by its task threads).
@@ -194,39 +196,3 @@ def _remember(memo: dict) -> None:
         for fit in [k for k in _memo if getattr(k, "calibration", None) == old]:
             _drop(fit)
 
-
-def openblas_threads(set_to: int | None = None) -> int | None:
-    """The thread count of the OpenBLAS libraries numpy and scipy loaded (None if none),
-    after setting it to ``set_to`` if given (as threadpoolctl does, without the dependency)."""
-    import ctypes
-
-    import numpy  # noqa: F401 - load both BLAS libraries before reading or setting them
-    import scipy.linalg  # noqa: F401
-
-    counts = []
-    for path in _loaded_openblas():
-        try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        for suffix in ("64_", ""):
-            getter = getattr(lib, f"scipy_openblas_get_num_threads{suffix}", None) \
-                or getattr(lib, f"openblas_get_num_threads{suffix}", None)
-            setter = getattr(lib, f"scipy_openblas_set_num_threads{suffix}", None) \
-                or getattr(lib, f"openblas_set_num_threads{suffix}", None)
-            if getter is None or setter is None:
-                continue
-            if set_to is not None:
-                setter(ctypes.c_int(int(set_to)))
-            counts.append(int(getter()))
-            break
-    return max(counts) if counts else None
-
-
-def _loaded_openblas() -> list[str]:
-    try:
-        with open("/proc/self/maps") as fh:
-            paths = {line.split()[-1] for line in fh if "/" in line}
-    except OSError:
-        return []
-    return sorted(p for p in paths if "openblas" in p.rsplit("/", 1)[-1].lower())

@@ -17,6 +17,12 @@ from pathlib import Path
 
 from rippleb.errors import InputError
 
+#: The distributions whose code computes a number of a row: the simulator (numpy, scipy,
+#: numba and its llvmlite, Pinocchio and the robot models), the methods (filterpy), and
+#: the readers and writers of logs and results (pandas, pyarrow).
+NUMBER_PRODUCERS = ("numpy", "scipy", "numba", "llvmlite", "pin", "example-robot-data",
+                    "example-robot-data-loaders", "pandas", "pyarrow", "filterpy")
+
 #: The paths whose changes can move a result; a dirty flag over the whole tree would also
 #: count notes, docs and results/ itself.
 CODE_PATHS = ("rippleb", "methods", "scenarios", "pyproject.toml")
@@ -36,7 +42,64 @@ def collect_provenance(argv=None) -> dict:
             "rippleb_version": __version__, **git_state(),
             "python": platform.python_version(), "numpy": numpy.__version__, "scipy": scipy.__version__,
             "pinocchio": _pinocchio_version(), "platform": platform.platform(terse=True),
-            "cpu": system_info()["cpu"], "cpu_count": os.cpu_count()}
+            "cpu": system_info()["cpu"], "cpu_count": os.cpu_count(), **environment()}
+
+
+def environment() -> dict:
+    """What decides a row's last bits besides rippleb's code: ``versions`` of
+    :data:`NUMBER_PRODUCERS` and the ``machine``'s numeric paths
+    (:func:`rippleb.numerics.machine`)."""
+    from importlib import metadata
+
+    from rippleb import numerics
+
+    versions = {}
+    for name in NUMBER_PRODUCERS:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return {"versions": versions, "machine": numerics.machine()}
+
+
+def environment_warnings(frame, run: dict) -> list[str]:
+    """One line each when a run's rows were not all produced alike: versions or machine
+    changed at a ``--resume`` (recorded in ``run["environment_changes"]``), or the rows
+    hold more than one rippleb, Python, numpy or numeric-path value, or rows that did not
+    run the portable numeric paths (:mod:`rippleb.numerics`)."""
+    out = [f"the run was resumed on another environment ({'; '.join(change['changes'])}): "
+           f"{_portability_note(change)}" for change in run.get("environment_changes", [])]
+    for col in ("rippleb_version", "python", "numpy", "numerics"):
+        values = sorted(str(v) for v in frame[col].dropna().unique()) if col in frame else []
+        if len(values) > 1:
+            out.append(f"the rows were produced with {len(values)} different {col} values "
+                       f"({', '.join(values)}); their last bits may differ")
+    if "numerics" in frame:
+        native = frame["numerics"].dropna().astype(str)
+        native = native[native != "portable"]
+        if len(native):
+            out.append(f"{len(native)} rows ran the host's own numeric paths ({native.iloc[0]}), "
+                       "not the portable ones: they may differ in the last bits on another CPU "
+                       "(docs/reproducibility.md)")
+    return out
+
+
+def _portability_note(change: dict) -> str:
+    if change.get("portable"):
+        return "both ran the portable numeric paths, so the CPU does not change the numbers; a version may"
+    return "rows of the two parts may differ in their last bits"
+
+
+def environment_changes(before: dict, after: dict) -> list[str]:
+    """``name: before -> after`` for each version or machine entry that differs between
+    two provenance records (entries one of them lacks are said to be unrecorded)."""
+    changes = []
+    for group in ("versions", "machine"):
+        old, new = before.get(group) or {}, after.get(group) or {}
+        for name in sorted(set(old) | set(new)):
+            if old.get(name) != new.get(name):
+                changes.append(f"{name}: {old.get(name, 'not recorded')} -> {new.get(name, 'not recorded')}")
+    return changes
 
 
 def _pinocchio_version() -> str:
@@ -127,10 +190,25 @@ def provenance_markdown(prov: dict) -> str:
             ["numpy / scipy / pinocchio", " / ".join(str(run.get(k, "not recorded"))
                                                     for k in ("numpy", "scipy", "pinocchio"))],
             ["CPU", str(run.get("cpu", prov.get("rows_cpu", "not recorded")))],
+            *machine_rows(run),
             ["platform", str(run.get("platform", "not recorded"))],
             ["command of this report", _code(rep["command"])],
             ["git commit of this report", git_text(rep)]]
     return markdown(rows, ["", "value"])
+
+
+def machine_rows(run: dict) -> list[list[str]]:
+    """Provenance rows for what decides the last bits: the versions of
+    :data:`NUMBER_PRODUCERS`, the CPU's SIMD features and the numeric paths."""
+    versions, machine = run.get("versions"), run.get("machine")
+    if not versions or not machine:
+        return [["versions and numeric paths", "not recorded (a run made before they were recorded)"]]
+    return [["versions that compute the numbers", ", ".join(f"{k} {v}" for k, v in versions.items())],
+            ["CPU SIMD features (LLVM)", machine.get("cpu_simd", "not recorded")],
+            ["numba compiles for", machine.get("numba_cpu", "not recorded")],
+            ["numeric paths", f"{machine.get('numerics', 'not recorded')} (numpy dispatch "
+             f"{machine.get('numpy_dispatch', '?')}, OpenBLAS {machine.get('openblas', '?')}, "
+             f"{machine.get('libc', '?')})"]]
 
 
 def _code(text: str) -> str:

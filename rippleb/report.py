@@ -22,7 +22,7 @@ import numpy as np
 
 from rippleb.errors import InputError
 from rippleb.files import atomic_path
-from rippleb.provenance import (collect_provenance, git_state, provenance_markdown,  # noqa: F401
+from rippleb.provenance import (collect_provenance, environment_warnings, git_state, provenance_markdown,  # noqa: F401
                                 read_run_provenance, seeds_text)
 from rippleb.results import swept_columns
 from rippleb.stats import (CONFIDENCE, METHOD_ORDER, fmt_interval, interval_frame,  # noqa: F401
@@ -96,12 +96,14 @@ def read_results_exact(path):
     return pd.read_csv(path, float_precision="round_trip")
 
 
-def compare_rows(published, fresh, columns=ACCURACY_COLUMNS) -> list[str]:
+def compare_rows(published, fresh, columns=ACCURACY_COLUMNS, rtol: dict | None = None) -> list[str]:
     """Differences between the rows of ``fresh`` and the same (method, scenario,
-    [condition,] seed) rows of ``published``, in ``columns``, compared exactly (NaN equals NaN).
+    [condition,] seed) rows of ``published``, in ``columns``, compared exactly (NaN equals
+    NaN), or where ``rtol`` names a column's relative tolerance, within it.
 
     Returns one line per missing row or differing value; empty when they agree.
     """
+    rtol = rtol or {}
     published, fresh = with_condition(published), with_condition(fresh)
     keys = ["method", "scenario", "condition", "seed"]
     pub = published.set_index(keys)
@@ -115,10 +117,19 @@ def compare_rows(published, fresh, columns=ACCURACY_COLUMNS) -> list[str]:
         old = pub.loc[key]
         for col in ("status",) + tuple(columns):
             a, b = old[col], row[col]
-            same = (a == b) or (isinstance(a, float) and isinstance(b, float) and np.isnan(a) and np.isnan(b))
-            if not same:
-                problems.append(f"{key} {col}: published {_plain(a)!r}, re-run {_plain(b)!r}")
+            if not _same(a, b, rtol.get(col)):
+                within = f" (beyond the relative tolerance {rtol[col]:g})" if col in rtol else ""
+                problems.append(f"{key} {col}: published {_plain(a)!r}, re-run {_plain(b)!r}{within}")
     return problems
+
+
+def _same(a, b, rtol: float | None) -> bool:
+    both_float = isinstance(a, float) and isinstance(b, float)
+    if both_float and np.isnan(a) and np.isnan(b):
+        return True
+    if rtol is not None and both_float:
+        return abs(a - b) <= rtol * abs(a)
+    return a == b
 
 
 def _plain(value):
@@ -226,7 +237,7 @@ def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, arg
         values = sorted(str(v) for v in frame[col].dropna().unique()) if col in frame else []
         prov[f"rows_{col}"] = ", ".join(values) or "not recorded"
     prov["run_dir"] = str(run_dir)
-    drawn, warnings, signals = {}, [], {}
+    drawn, warnings, signals = {}, environment_warnings(frame, prov["run"]), {}
     if figures and swept_columns(frame.columns):
         # a sweep is read through error against each swept parameter; the signal figures
         # would show the built-in scenarios at values the sweep did not hold fixed
@@ -237,9 +248,10 @@ def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, arg
         from rippleb import figures as figs
 
         seeds = sorted(int(s) for s in frame["seed"].unique())
-        drawn, warnings = figs.draw_all(frame, out / "figures", seed=figure_seed, fmt=figure_format,
+        drawn, figure_warnings = figs.draw_all(frame, out / "figures", seed=figure_seed, fmt=figure_format,
                                         speed_seeds=seeds[:speed_seeds] if speed_seeds else seeds,
                                         keep=signals)
+        warnings += figure_warnings
     prov["figure_seed"] = figure_seed if figures else None
     # A byte copy, not a rewrite: re-printing parsed floats could change their last digit,
     # and tests/test_published.py compares them exactly.

@@ -33,7 +33,7 @@ from rippleb.metrics import METRIC_COLUMNS
 KEY_COLUMNS = ("method", "scenario", "condition", "seed")
 COLUMNS = (KEY_COLUMNS + ("status",) + METRIC_COLUMNS
            + ("message", "n_samples", "fit_s", "wall_s", "calibration", "params", "scenario_sha256",
-              "rippleb_version", "python", "numpy", "platform", "cpu", "run_id"))
+              "rippleb_version", "python", "numpy", "platform", "cpu", "numerics", "run_id"))
 NUMERIC_COLUMNS = METRIC_COLUMNS + ("n_samples", "fit_s", "wall_s")
 STATUSES = ("ok", "error", "invalid", "timeout")
 #: message prefix of rows that failed for a reason outside the method (``--resume`` retries them)
@@ -53,10 +53,11 @@ def system_info() -> dict[str, str]:
     """Versions and machine, the same for every row of one run."""
     import numpy
 
-    from rippleb import __version__
+    from rippleb import __version__, numerics
 
     return {"rippleb_version": __version__, "python": platform.python_version(),
-            "numpy": numpy.__version__, "platform": platform.platform(terse=True), "cpu": _cpu_name()}
+            "numpy": numpy.__version__, "platform": platform.platform(terse=True), "cpu": _cpu_name(),
+            "numerics": numerics.state()}
 
 
 def _cpu_name() -> str:

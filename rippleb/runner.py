@@ -28,11 +28,13 @@ import contextlib
 import datetime as _dt
 import tempfile
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from rippleb import jobs as job_fns
+from rippleb import numerics
 from rippleb.cache import digest, log_bytes
 from rippleb.checks import check_calibration, check_options, check_recording, check_scenario
 from rippleb.simulator.conditions import DEFAULT_CONDITION
@@ -43,7 +45,7 @@ from rippleb.metrics import Truth, score, tick_stats
 from rippleb.pool import Pool
 from rippleb.registry import Registry
 from rippleb.executors import row_tasks
-from rippleb.results import ResultsFile, row_key
+from rippleb.results import ResultsFile, RunWarning, row_key
 from rippleb.rows import (CALIBRATION, FITTING, SCORED, Case, RowKey, scenario_hash, select_conditions,
                           select_scenarios, split_names)
 from rippleb.rundir import log_dir, read_config, run_dir
@@ -139,6 +141,7 @@ def run_resolved(registry: Registry, names: list[str], entries: list[tuple], con
     never share a row; their scenario content (hashed into every cache file name)
     differs. The options are those of :func:`run`; ``config`` is saved in ``run.json``.
     """
+    _warn_native_numerics()
     plan = Plan(calibration_label=CALIBRATION)
     for seed in seeds:
         for scenario, calibration, extra in entries:
@@ -153,6 +156,17 @@ def run_resolved(registry: Registry, names: list[str], entries: list[tuple], con
                     plan.add_row(key, case, cal_case)
     return _execute(registry, plan, out=out, jobs=jobs, timeout=timeout, memory_mb=memory_mb,
                     resume=resume, progress=progress, config=config, on_start=on_start, executor=executor)
+
+
+def _warn_native_numerics() -> None:
+    """One line when this process cannot give rows that re-run to the last bit elsewhere."""
+    state = numerics.state()
+    if state != numerics.PORTABLE:
+        why = (f"{numerics.NATIVE_SWITCH} is set" if numerics.native_requested()
+               else "numpy was imported before rippleb")
+        warnings.warn(RunWarning(f"the rows run the host's own numeric paths ({state}; {why}): "
+                                 "they may differ in their last bits from the same rows on another "
+                                 "CPU (docs/reproducibility.md)"), stacklevel=3)
 
 
 def run_log(log, calibration=None, methods=None, *, jobs: int = 1, out=None,

@@ -4,6 +4,10 @@ installs, the browser, property fuzzing) and is what CI runs (``.ci/run``)."""
 
 import pytest
 
+# Before any test module loads numpy: the portable numeric paths (rippleb/numerics.py),
+# without which the published rows re-run differently on an AVX-512 CPU.
+import rippleb  # noqa: F401
+
 #: Files that one xdist worker runs whole: their tests share a module fixture (one run of
 #: every case, one plugin install, one simulation) or a cache kept per process, which
 #: another worker would compute again. Every other test is handed out on its own.
@@ -24,14 +28,27 @@ def pytest_addoption(parser):
 
 
 def pytest_configure(config):
-    """With --full, compile rippleb's numba kernels once, in the controller, before any
-    worker starts: on a fresh checkout every process that imports them would compile them
-    itself (about 15 s each), and the slow tests that run first start many such processes
-    at once. Later processes load them from numba's on-disk cache."""
+    """Check that the suite runs the portable numeric paths. With --full, compile rippleb's
+    numba kernels once, in the controller, before any worker starts: on a fresh checkout
+    every process that imports them would compile them itself (about 15 s each), and the
+    slow tests that run first start many such processes at once. Later processes load
+    them from numba's on-disk cache."""
+    _check_numerics()
     if config.getoption("--full") and not hasattr(config, "workerinput"):
         from rippleb.dask_worker import _load_modules  # what a Dask worker preloads
 
         _load_modules()
+
+
+def _check_numerics():
+    """Stop at once if numpy was loaded before rippleb could pin its paths (a plugin that
+    imports numpy early): every exact comparison would then depend on this CPU."""
+    from rippleb import numerics
+
+    state = numerics.state()
+    if state != numerics.PORTABLE and not numerics.native_requested():
+        pytest.exit(f"the suite does not run rippleb's portable numeric paths ({state}); "
+                    "something imported numpy before rippleb (rippleb/numerics.py)", returncode=3)
 
 
 def pytest_collection_modifyitems(config, items):
@@ -51,6 +68,35 @@ def pytest_report_header(config):
     if not (config.getoption("--full") or config.option.markexpr):
         return "fast default: tests marked slow are deselected; run with --full for the whole suite (CI)"
     return None
+
+
+def off_lock() -> list[str]:
+    """The packages that compute numbers (``rippleb.provenance.NUMBER_PRODUCERS``) whose
+    installed version is not the one in ``constraints.txt``, as ``name X (lock Y)``.
+
+    Empty in the environment that produced ``results/``: there the published rows and
+    pinned log hashes must re-run bit for bit (docs/reproducibility.md); with other
+    versions only their last bits may differ, and the exact checks say so and step back.
+    """
+    from importlib import metadata
+    from pathlib import Path
+
+    from rippleb.provenance import NUMBER_PRODUCERS
+
+    lock = {}
+    for line in (Path(__file__).resolve().parent.parent / "constraints.txt").read_text().splitlines():
+        name, sep, version = line.split("#")[0].strip().partition("==")
+        if sep:
+            lock[name.lower()] = version
+    off = []
+    for name in NUMBER_PRODUCERS:
+        try:
+            installed = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            installed = "not installed"
+        if installed != lock.get(name):
+            off.append(f"{name} {installed} (lock {lock.get(name, 'none')})")
+    return off
 
 
 @pytest.fixture

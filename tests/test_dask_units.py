@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from rippleb.dask_executor import _fields
-from rippleb.dask_worker import openblas_threads
+from rippleb.numerics import openblas_threads
 from rippleb.executors import RowTask, run_task
 from rippleb.registry import Registry
 from rippleb.rows import RowKey

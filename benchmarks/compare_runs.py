@@ -1,6 +1,12 @@
 """What moved between two runs: mean error per method and condition, and the rankings.
 
     python benchmarks/compare_runs.py results/results.csv runs/published/results.csv
+    python benchmarks/compare_runs.py --spread before.csv after.csv
+
+``--spread`` measures how far two runs of the same rows are apart when only the last bits of
+the arithmetic differ (another CPU's numeric paths, docs/reproducibility.md): how many rows
+are bit for bit equal, the relative difference of each accuracy column per row, and the
+difference of each cell's mean over seeds against its 95 % interval.
 
 Reads two ``results.csv`` files (for instance the published table before a change of the
 simulator and the run after it) and prints Markdown tables: the mean ``rms_error_nm`` and
@@ -67,7 +73,39 @@ def compare(before_path: str, after_path: str) -> str:
     return "\n".join(parts)
 
 
+def spread(before_path: str, after_path: str) -> str:
+    from rippleb.stats import interval_frame
+    from rippleb.tables import ACCURACY_COLUMNS
+
+    before, after = common_rows(load(before_path), load(after_path))
+    before, after = before.sort_values(KEY).reset_index(drop=True), after.sort_values(KEY).reset_index(drop=True)
+    columns = [c for c in ACCURACY_COLUMNS if c != "n_samples"]
+    same = pd.concat([(before[c] == after[c]) | (before[c].isna() & after[c].isna()) for c in columns], axis=1)
+    parts = [f"{len(before)} rows in both runs; {int(same.all(axis=1).sum())} equal bit for bit in every "
+             "accuracy column\n", "## relative difference per row, |after - before| / |before|\n"]
+    records = []
+    for c in columns:
+        rel = ((after[c] - before[c]).abs() / before[c].abs()).dropna()
+        records.append({"column": c, "rows differing": int((rel > 0).sum()), "median": rel.median(),
+                        "95th percentile": rel.quantile(0.95), "max": rel.max()})
+    parts.append(pd.DataFrame(records).to_markdown(index=False, floatfmt=".2g") + "\n")
+    cells = interval_frame(before, "rms_error_nm", by=("method", "scenario", "condition"))
+    moved = interval_frame(after, "rms_error_nm", by=("method", "scenario", "condition"))
+    cells = cells.merge(moved, on=["method", "scenario", "condition"], suffixes=("", "_after"))
+    ratio = (cells["mean_after"] - cells["mean"]).abs() / cells["half"]
+    parts.append("## cell means (method x scenario x condition, rms_error_nm over seeds)\n\n"
+                 f"{len(cells)} cells; |mean after - mean before| / 95 % half-width: median "
+                 f"{ratio.median():.3g}, 95th percentile {ratio.quantile(0.95):.3g}, max {ratio.max():.3g} "
+                 f"({cells.loc[ratio.idxmax(), ['method', 'scenario', 'condition']].tolist()}); "
+                 f"relative change of the mean: max "
+                 f"{((cells['mean_after'] - cells['mean']).abs() / cells['mean']).max():.3g}\n")
+    return "\n".join(parts)
+
+
 if __name__ == "__main__":
-    if len(sys.argv) != 3:
+    if len(sys.argv) == 4 and sys.argv[1] == "--spread":
+        print(spread(sys.argv[2], sys.argv[3]))
+    elif len(sys.argv) == 3:
+        print(compare(sys.argv[1], sys.argv[2]))
+    else:
         sys.exit(__doc__.split("\n\n")[1].strip())
-    print(compare(sys.argv[1], sys.argv[2]))

@@ -14,6 +14,7 @@ docs/scale.md.
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 
 
@@ -35,11 +36,14 @@ def main(argv=None) -> None:
     from dask_jobqueue import SLURMCluster
 
     from rippleb.dask_executor import QUIET_CONFIG, quiet_environment
+    from rippleb.numerics import pinned_environment
 
     args = parse_args(argv)
     # Dask's idle periodic callbacks, cut for the scheduler (here) and the workers (their jobs'
     # environment): at the defaults they would take a third of a core per 8-worker job.
-    exports = [f"export {name}={value}" for name, value in quiet_environment().items()]
+    # ... and the portable numeric paths: `dask worker` loads numpy before rippleb could set them.
+    exports = [f"export {name}={shlex.quote(value)}"
+               for name, value in {**quiet_environment(), **pinned_environment({})}.items()]
     with dask.config.set(QUIET_CONFIG), \
             SLURMCluster(queue=args.queue, cores=args.cores, processes=args.cores, memory=args.memory,
                          walltime=args.walltime, scheduler_options={"host": args.host},

@@ -169,6 +169,16 @@ def _warn_native_numerics() -> None:
                                  "CPU (docs/reproducibility.md)"), stacklevel=3)
 
 
+def _warn_native_rows(rows: list[dict]) -> None:
+    """One line when rows that ran elsewhere (Dask workers) used their host's own paths."""
+    native = [row["numerics"] for row in rows if row.get("numerics", numerics.PORTABLE) != numerics.PORTABLE]
+    if native:
+        warnings.warn(RunWarning(f"{len(native)} rows ran on workers with their host's own numeric "
+                                 f"paths ({native[0]}): start 'dask worker' with the variables of "
+                                 "docs/scale.md so that they re-run to the last bit elsewhere"),
+                      stacklevel=3)
+
+
 def run_log(log, calibration=None, methods=None, *, jobs: int = 1, out=None,
             timeout: float | None = DEFAULT_TIMEOUT_S, memory_mb: float | None = DEFAULT_MEMORY_MB,
             progress: bool | None = False, on_start=None):
@@ -258,6 +268,7 @@ def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, pro
                     else:  # whole rows run elsewhere; this process only records them
                         executor.run(row_tasks(state, memory_mb),
                                      lambda key, fields: record(state, key, bar, **fields))
+                        _warn_native_rows(results.rows)
         finally:  # finished or interrupted: the file in key order, from the rows in memory
             if results.rows:
                 results.flush()

@@ -203,3 +203,16 @@ def test_the_scale_page_lists_the_quiet_settings():
     exported = dict(line.removeprefix("export ").split("=", 1) for line in page.splitlines()
                     if line.startswith("export DASK_"))
     assert exported == quiet_environment()
+
+
+def test_the_scale_page_lists_the_portable_numerics_variables():
+    """docs/scale.md tells users of hand-started workers how to get the portable paths."""
+    import shlex
+    from pathlib import Path
+
+    from rippleb.numerics import pinned_environment
+
+    page = (Path(__file__).parents[1] / "docs" / "scale.md").read_text()
+    exported = dict(shlex.split(line.removeprefix("export "))[0].split("=", 1) for line in page.splitlines()
+                    if line.startswith(("export NPY_", "export OPENBLAS_")))
+    assert exported == pinned_environment({})

@@ -59,10 +59,15 @@ def _rerun(tmp_path) -> pd.DataFrame:
     return pd.concat(fresh, ignore_index=True)
 
 
-#: Relative difference of an accuracy column between the published run and a re-run with a
-#: last-bit perturbation (the native AVX-512 paths against the portable ones, every one of
-#: the 6400 published rows; docs/reproducibility.md): the largest measured, times 2.
-RELATIVE_TOLERANCE = None
+#: Per accuracy column, how far a row may move when only the last bits of the arithmetic
+#: differ: the 99.9th percentile of |after - before| / |before| over the 6400 published rows
+#: re-run with another CPU's numeric paths (AVX-512 native against portable, 2026-11-24,
+#: `python benchmarks/compare_runs.py --spread`; docs/reproducibility.md), rounded up. The
+#: closed loop makes that spread wide, so off the lock this catches a table tens of percent
+#: off (another model or method), not a subtle change: the exact check under the lock does.
+RELATIVE_TOLERANCE = {"rms_error_nm": 0.4, "max_error_nm": 0.35, "rms_error_ref_nm": 0.15,
+                      "max_error_ref_nm": 0.25, "delay_ms": 0.3, "restart_max_error_nm": 0.4,
+                      "stopped_rms_error_nm": 0.75}
 #: What a re-run must reproduce exactly whatever the versions: nothing here is computed in
 #: floating point by the simulator or a method.
 EXACT_ANYWHERE = ("status", "n_samples", "scenario_sha256")

@@ -197,6 +197,22 @@ def provenance_markdown(prov: dict) -> str:
     return markdown(rows, ["", "value"])
 
 
+def environment_sentence(run: dict) -> str:
+    """The report's header line on what decides the last bits of its numbers."""
+    versions, machine = run.get("versions"), run.get("machine")
+    if not versions or not machine:
+        return ("Versions and numeric paths of the run: not recorded (a run made before rippleb "
+                "recorded them; docs/reproducibility.md).")
+    names = ", ".join(f"{k} {versions[k]}" for k in ("numpy", "scipy", "numba", "pin") if k in versions)
+    if machine.get("numerics") == "portable":
+        how = ("portable numeric paths: with these versions (`constraints.txt` for `results/`) every "
+               "row re-runs bit for bit on any x86-64 CPU with AVX2, AVX-512 or not")
+    else:
+        how = (f"the host's own numeric paths ({machine.get('numerics')}): rows may differ in "
+               "their last bits on another CPU")
+    return f"Made with {names} on {how} (docs/reproducibility.md; all versions under Provenance)."
+
+
 def machine_rows(run: dict) -> list[list[str]]:
     """Provenance rows for what decides the last bits: the versions of
     :data:`NUMBER_PRODUCERS`, the CPU's SIMD features and the numeric paths."""

@@ -22,7 +22,8 @@ import numpy as np
 
 from rippleb.errors import InputError
 from rippleb.files import atomic_path
-from rippleb.provenance import (collect_provenance, environment_warnings, git_state, provenance_markdown,  # noqa: F401
+from rippleb.provenance import (collect_provenance, environment_sentence, environment_warnings, git_state,
+                                provenance_markdown,  # noqa: F401
                                 read_run_provenance, seeds_text)
 from rippleb.results import swept_columns
 from rippleb.stats import (CONFIDENCE, METHOD_ORDER, fmt_interval, interval_frame,  # noqa: F401
@@ -179,7 +180,8 @@ def readme_markdown(frame, prov: dict, figures: dict, *, published: bool = False
     (``rippleb report ... --published``): only then does the title say so.
     """
     recorded = is_recorded(frame)
-    parts = title_lines(published, recorded, run_dir) + ["", counts_sentence(frame, recorded)]
+    parts = title_lines(published, recorded, run_dir) + ["", counts_sentence(frame, recorded),
+                                                         "", environment_sentence(prov.get("run", {}))]
     parts += ["", READING_RECORDED if recorded else READING_SIMULATED]
     parts += ["", tables_markdown(frame)]
     if "us_per_tick_p99" in frame:

@@ -117,7 +117,7 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     meta = {"scenario": sc.name, "seed": seed,
             "condition": condition if sc.scored else calibration_condition(condition)}
     if knobs.active:
-        meta["unmodelled"] = {k: v for k, v in describe(knobs).items()}
+        meta["unmodelled"] = describe(knobs)
     if sc.faults.active:
         # Own generator: a faulty scenario's healthy signals stay those of the same
         # scenario without faults, and scenarios without faults are untouched.

@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from rippleb.simulator.conditions import DEFAULT_CONDITION
+from rippleb.simulator.conditions import calibration_condition
 from rippleb.pool import Pool
 from rippleb.results import ResultsFile
 from rippleb.rows import CALIBRATION, FITTING, SCORED, Case, RowKey, scenario_hash
@@ -78,7 +78,7 @@ def run_task(task: RowTask, cache: Path, registry, memo: dict | None = None, ser
 
     key = task.key
     cal_hash = task.calibration_hash or scenario_hash(task.calibration)
-    cal_case = Case(CALIBRATION, cal_hash, DEFAULT_CONDITION, key.seed, FITTING)
+    cal_case = Case(CALIBRATION, cal_hash, calibration_condition(key.condition), key.seed, FITTING)
     case = Case(key.scenario, task.scenario_hash or scenario_hash(task.scenario), key.condition, key.seed, SCORED)
     plan = Plan(calibration_label=CALIBRATION)
     plan.add_sim(task.calibration, cal_case)

@@ -65,9 +65,19 @@ class Case:
 
 def scenario_hash(scenario) -> str:
     """SHA-256 of a scenario's content (every parsed field but its file path)."""
-    fields = {f.name: getattr(scenario, f.name) for f in dataclasses.fields(scenario) if f.name != "path"}
+    fields = {f.name: getattr(scenario, f.name) for f in dataclasses.fields(scenario)
+              if f.name != "path" and not _default_added_field(scenario, f)}
     text = json.dumps(_plain(fields), sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+#: Scenario fields added after results were published: left out of the hash while they hold
+#: their default, so every scenario that does not use them keeps its published hash.
+_ADDED_FIELDS = ("unmodelled",)
+
+
+def _default_added_field(scenario, f) -> bool:
+    return f.name in _ADDED_FIELDS and getattr(scenario, f.name) == f.default
 
 
 def _plain(value):

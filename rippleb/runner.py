@@ -4,8 +4,9 @@ A run has three kinds of jobs (:mod:`rippleb.jobs`), each in its own isolated ch
 :class:`rippleb.pool.Pool`:
 
 * a *simulation* per (scenario content, condition, seed), plus the ``calibration``
-  scenario per seed, always simulated under ``same-session`` (it is the device's first
-  session). It writes what methods may see to hashed cache files and sends the truth
+  scenario per seed, simulated under ``same-session`` (it is the device's first
+  session), or under ``realistic`` for that condition's rows (it changes the joint itself:
+  ``conditions.calibration_condition``). It writes what methods may see to hashed cache files and sends the truth
   back through its pipe; the runner keeps the truth in memory only, and only while rows
   of that case are pending;
 * a *fit* per method and calibration log: ``fit`` once, as on a real device, and pickle
@@ -37,7 +38,7 @@ from rippleb import jobs as job_fns
 from rippleb import numerics
 from rippleb.cache import digest, log_bytes
 from rippleb.checks import check_calibration, check_options, check_recording, check_scenario
-from rippleb.simulator.conditions import DEFAULT_CONDITION
+from rippleb.simulator.conditions import DEFAULT_CONDITION, calibration_condition
 from rippleb.data import SensorLog
 from rippleb.errors import InputError
 from rippleb.forkserver import ForkServer
@@ -145,10 +146,13 @@ def run_resolved(registry: Registry, names: list[str], entries: list[tuple], con
     plan = Plan(calibration_label=CALIBRATION)
     for seed in seeds:
         for scenario, calibration, extra in entries:
-            cal_case = Case(CALIBRATION, scenario_hash(calibration), DEFAULT_CONDITION, seed, FITTING)
-            plan.add_sim(calibration, cal_case)
             content = scenario_hash(scenario)
             for condition in conditions:
+                # the device's first session; under a condition of the joint itself
+                # (`realistic`) that session has the joint's physics too
+                cal_case = Case(CALIBRATION, scenario_hash(calibration), calibration_condition(condition),
+                                seed, FITTING)
+                plan.add_sim(calibration, cal_case)
                 case = Case(scenario.name, content, condition, seed, SCORED)
                 plan.add_sim(scenario, case)
                 for method in names:

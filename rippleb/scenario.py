@@ -26,6 +26,7 @@ import numpy as np
 
 from rippleb.data import JointSpec
 from rippleb.errors import InputError
+from rippleb.mismatch import TABLES as _UNMODELLED_TABLES, Unmodelled, parse_tables
 from rippleb.profiles import DEFAULT_RISE, Load, Segment, evaluate_segments  # noqa: F401 (re-exported)
 
 CALIBRATION = "calibration"
@@ -36,7 +37,7 @@ _NUMBER = (float, int)
 _TOP_KEYS = {"description": (str,), "scored": (bool,), "duration": _NUMBER,
              "temperature_c": _NUMBER, "evaluation": (dict,), "joint": (dict,),
              "robot": (dict,), "trajectory": (dict,), "load": (list,), "faults": (dict,),
-             "ripple": (dict,)}
+             "ripple": (dict,), **{table: (dict,) for table in _UNMODELLED_TABLES}}
 _RIPPLE_KEYS = {"output_scale": _NUMBER, "hysteresis_nm": _NUMBER, "temperature_coeff": _NUMBER,
                 "drift": _NUMBER}
 _EVAL_KEYS = {"start": _NUMBER, "stop": _NUMBER}
@@ -181,6 +182,10 @@ class Scenario:
     ripple
         Output-locked ripple, hysteresis and the ripple's temperature coefficient
         (:class:`RippleSettings`); the documented defaults.
+    unmodelled
+        The physics beyond the methods' models that the scenario switches on
+        (:class:`~rippleb.mismatch.Unmodelled`; tables ``[mismatch]``, ``[thermal]``,
+        ``[daq]``, ``[encoder]``, ``[controller]``); none by default.
     """
 
     name: str
@@ -198,6 +203,7 @@ class Scenario:
     loads: tuple[Load, ...]
     faults: Faults = Faults()
     ripple: RippleSettings = RippleSettings()
+    unmodelled: Unmodelled = Unmodelled()
 
     def trajectory(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Commanded joint position, velocity, acceleration at times ``t``."""
@@ -376,13 +382,17 @@ class _Parser:
         if ripple.temperature_scale(temperature) < 0:
             self.fail("ripple.temperature_coeff", f"{ripple.temperature_coeff:g} per K would turn the "
                       f"ripple negative at {temperature:g} degC")
+        for table, keys in _UNMODELLED_TABLES.items():
+            self.table(top.get(table, {}), keys, table)
+        unmodelled = parse_tables(top, self.fail, spec)
         return Scenario(name=self.name, path=self.path,
                         description=top.get("description", "").strip(),
                         spec=spec, duration=duration, scored=top.get("scored", True),
                         evaluation=evaluation,
                         temperature_c=temperature,
                         robot=robot, joint=joint, posture=posture,
-                        segments=segments, loads=loads, faults=faults, ripple=ripple)
+                        segments=segments, loads=loads, faults=faults, ripple=ripple,
+                        unmodelled=unmodelled)
 
     def spec(self, raw) -> JointSpec:
         values = self.table(raw, _JOINT_KEYS, "joint")

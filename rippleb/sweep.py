@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rippleb.errors import InputError
+from rippleb.mismatch import KNOBS as _KNOBS
 from rippleb.registry import unknown_name
 
 
@@ -83,6 +84,21 @@ PARAMS = {p.name: p for p in (
           "drift of ripple and bridge zero since calibration, x the documented estimate "
           "(default 1); acts under --conditions aged only", device=False),
 )}
+
+#: The physics beyond the methods' models (:mod:`rippleb.mismatch`, docs/physics.md "Beyond
+#: the methods' models"), one parameter per knob: properties of the joint, so its calibration
+#: session has them too. A value set by a sweep acts under every condition; under
+#: ``realistic`` the knobs not swept keep their documented magnitudes. Ranges: from off to a
+#: few times the ``realistic`` magnitude (docs/sweeps.md gives the reason for each).
+UNMODELLED_RANGES = {
+    "mismatch.gauge_mode_hz": (0.0, 5000.0), "mismatch.load_saturation": (0.0, 5.0),
+    "mismatch.flank_asymmetry": (0.0, 0.5), "thermal.gain_coeff": (-1.0e-3, 1.0e-3),
+    "thermal.warmup_rate": (0.0, 10.0), "daq.adc_bits": (8, 24), "daq.antialias_hz": (0.0, 20_000.0),
+    "daq.pwm_mv": (0.0, 100.0), "daq.pwm_hz": (4000.0, 100_000.0), "encoder.edge_error": (0.0, 30.0),
+    "encoder.eccentricity": (0.0, 5.0), "encoder.missed": (0.0, 1.0e-3),
+    "controller.bandwidth_factor": (0.5, 3.0),
+}
+PARAMS.update({k.name: Param(k.name, k.kind, *UNMODELLED_RANGES[k.name], k.doc) for k in _KNOBS})
 
 #: Parameters that change only the scored session of one condition: sweeping them
 #: without it would give every grid point the same rows.

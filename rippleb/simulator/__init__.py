@@ -13,6 +13,10 @@ module                    what it holds
 ``ripple``                output-locked ripple, ripple temperature scale, strain hysteresis
 ``sensors``               strain bridge, current sense, encoder counter, ADCs, sensor faults
 ``conditions``            deployment conditions and the encoder's index pulse
+``gauge``                 beyond the methods' models: the flexspline mode, non-affine and
+                          flank-dependent ripple, span drift (:mod:`rippleb.mismatch`)
+``daq``                   beyond the methods' models: anti-alias filter, PWM pickup
+``encoder``               beyond the methods' models: edge errors, eccentricity, missed counts
 ========================  ==========================================================
 
 Every default is listed with its source in ``docs/physics.md``.

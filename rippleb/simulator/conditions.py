@@ -31,8 +31,14 @@ CONDITIONS = {
                     "start, the session may run at another temperature",
     "aged": "months of use since calibration: ripple amplitudes, phases and bridge zero drifted",
     "re-assembled": "flexspline re-mounted or drive swapped: gauge errors (ripple, gain) redrawn",
+    "realistic": "same session, but the joint has the physics no method models (gauge dynamics, "
+                 "non-affine and flank-dependent ripple, span drift, DAQ chain, encoder errors, "
+                 "stiffer loop), in its calibration log too",
 }
 DEFAULT_CONDITION = "same-session"
+#: Conditions that change the joint itself, not what happened after its calibration: its
+#: calibration log is recorded under them too (docs/physics.md, "Beyond the methods' models").
+SAME_JOINT_CONDITIONS = ("realistic",)
 
 # --- power-cycled (docs/physics.md, "Deployment conditions") ---
 #: The session runs this many kelvin below the scenario's temperature, drawn uniformly:
@@ -54,6 +60,17 @@ def check_condition(name: str) -> str:
     if name not in CONDITIONS:
         raise InputError(unknown_name("condition", name, list(CONDITIONS)))
     return name
+
+
+def calibration_condition(condition: str) -> str:
+    """The condition of the calibration log that rows of ``condition`` are fitted on.
+
+    The calibration is the device's first session, before anything happened to it, so it
+    is ``same-session`` for the deployment conditions; a condition of the joint itself
+    (``realistic``: the same joint with the physics no method models) acts on the
+    calibration session as on every other.
+    """
+    return condition if condition in SAME_JOINT_CONDITIONS else DEFAULT_CONDITION
 
 
 def stable_hash(text: str) -> int:
@@ -79,22 +96,27 @@ class Session:
     counter_start
         Count of the incremental encoder at the first sample, or None when the counter
         continues the calibration session's (absolute) count.
+    realistic
+        The unset knobs of :mod:`rippleb.mismatch` take their documented magnitudes.
     """
 
     device: object
     temperature_c: float
     counter_start: int | None = None
+    realistic: bool = False
 
 
 def session(device, scenario, condition: str) -> Session:
     """The session of ``scenario`` under ``condition`` for ``device`` (drawn by its seed).
 
     A scenario with ``scored = false`` (``calibration``) is the calibration session
-    itself: recorded first, before anything happened to the joint, so no condition
-    changes it.
+    itself: recorded first, before anything happened to the joint, so no deployment
+    condition changes it; ``realistic`` describes the joint, so it acts there too.
     """
     condition = check_condition(condition)
     same = Session(device=device, temperature_c=scenario.temperature_c)
+    if condition in SAME_JOINT_CONDITIONS:   # the joint itself, in every session
+        return dataclasses.replace(same, realistic=True)
     if condition == "same-session" or not scenario.scored:
         return same
     if condition == "power-cycled":

@@ -24,6 +24,7 @@ from rippleb.data import JointSpec
 from rippleb.scenario import REFERENCE_TEMPERATURE_C
 from rippleb.simulator import device as device_module
 from rippleb.simulator import joint
+from rippleb.simulator.encoder import IDEAL_PARAMS
 from rippleb.simulator.robot import LoadTable
 
 #: Closed-loop bandwidth as a fraction of the locked-motor resonance: a collocated PD
@@ -74,19 +75,29 @@ class Gains:
     resonance: float
 
 
-def design_gains(spec: JointSpec, link_inertia: float) -> Gains:
+def design_gains(spec: JointSpec, link_inertia: float, bandwidth_factor: float = 1.0) -> Gains:
     """Pole placement on the rigid joint of link inertia ``link_inertia`` [kg m^2]: the
-    bandwidth a third of the locked-motor resonance, at most ``2 pi control_rate / 20``."""
+    bandwidth a third of the locked-motor resonance, at most ``2 pi control_rate / 20``.
+
+    ``bandwidth_factor`` (the ``[controller]`` table of :mod:`rippleb.mismatch`) scales the
+    designed bandwidth before that cap: a stiffer (or softer) loop than the documented
+    design, with the same damping ratio.
+    """
     N = spec.gear_ratio
     inertia = spec.rotor_inertia + link_inertia / N**2
     resonance = np.sqrt(joint.STIFFNESS_LOW / link_inertia)
-    bandwidth = min(BANDWIDTH_FRACTION * resonance, 2 * np.pi * spec.control_rate / SAMPLES_PER_BANDWIDTH)
+    designed = BANDWIDTH_FRACTION * resonance
+    if bandwidth_factor != 1.0:
+        designed = designed * bandwidth_factor
+    bandwidth = min(designed, 2 * np.pi * spec.control_rate / SAMPLES_PER_BANDWIDTH)
     return Gains(kp=inertia * bandwidth**2, kd=2 * DAMPING_RATIO * inertia * bandwidth,
                  bandwidth=bandwidth, damping=DAMPING_RATIO, inertia=inertia, resonance=resonance)
 
 
-def motor_params(device, temperature_c: float, spec: JointSpec) -> dict:
-    """The device's motor and bearing friction and cogging as integrator parameters."""
+def motor_params(device, temperature_c: float, spec: JointSpec, encoder=None) -> dict:
+    """The device's motor and bearing friction, cogging and encoder (``encoder``: its
+    :class:`~rippleb.simulator.encoder.EncoderErrors`, None for an ideal disc) as
+    integrator parameters."""
     f = device.friction
     dt = temperature_c - REFERENCE_TEMPERATURE_C
     p1, p2, p3 = device.friction_phase
@@ -101,7 +112,7 @@ def motor_params(device, temperature_c: float, spec: JointSpec) -> dict:
         out_coulomb=out_coulomb, out_viscous=out_viscous * np.exp(-device_module.VISCOUS_TEMP_COEFF * dt),
         out_smoothing=device_module.OUTPUT_SIGN_SMOOTHING, encoder_zero=device.encoder_zero,
         gear_ratio=spec.gear_ratio, rotor_inertia=spec.rotor_inertia, torque_constant=spec.torque_constant,
-        counts_per_rev=spec.counts_per_rev)
+        counts_per_rev=spec.counts_per_rev, **(IDEAL_PARAMS if encoder is None else encoder.params()))
 
 
 def loop_params(spec: JointSpec, gains: Gains, table: LoadTable, *, controller=True, friction=True,
@@ -146,16 +157,17 @@ def initial_state(spec: JointSpec, gains: Gains, table: LoadTable, q_d0: float, 
 
 
 def run(spec: JointSpec, device, temperature_c: float, table: LoadTable, gains: Gains, t, trajectory,
-        tau_ref, external, **switches) -> np.ndarray:
+        tau_ref, external, encoder=None, **switches) -> np.ndarray:
     """Integrate the closed-loop joint over ``t``; rows ``joint.STATE``.
 
     ``trajectory`` is ``(q_d, qd_d, qdd_d)``, ``tau_ref`` the eq. (7) reference the
-    controller feeds forward, ``external`` the true external torque; ``switches`` go to
+    controller feeds forward, ``external`` the true external torque; ``encoder`` the
+    errors of the encoder the controller reads (None: ideal); ``switches`` go to
     :func:`loop_params` (``controller``, ``friction``, ``clamp_motor``, ``substeps``).
     """
     q_d, qd_d, qdd_d = trajectory
     ref = reference(spec, t, q_d, qd_d, qdd_d, tau_ref, device.encoder_zero)
-    params = joint.pack_params(**motor_params(device, temperature_c, spec),
+    params = joint.pack_params(**motor_params(device, temperature_c, spec, encoder),
                                **loop_params(spec, gains, table, **switches))
     inputs = np.ascontiguousarray(np.vstack([external, ref]))
     state0 = initial_state(spec, gains, table, float(q_d[0]), float(qd_d[0]), float(external[0]),

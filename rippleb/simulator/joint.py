@@ -95,10 +95,11 @@ PARAMS = ("dt", "substeps", "block", "gear_ratio", "rotor_inertia", "torque_cons
           "phase1", "phase2", "coulomb_scale", "viscous_scale", "sign_smoothing",
           "cogging", "cogging_order", "cogging_phase",
           "out_coulomb", "out_viscous", "out_smoothing",
-          "table_start", "table_step", "encoder_zero", "controller", "friction", "clamp_motor")
+          "table_start", "table_step", "encoder_zero", "controller", "friction", "clamp_motor",
+          "encoder_errors", "edge0", "edge1", "edge2", "edge3", "eccentricity", "eccentricity_phase")
 (DT, SUBSTEPS, BLOCK, GEAR, JM, KT, KP, KD, IMAX, CPR, VFILT, FC, FS, WS, FV, MU, R1, R2, PH1, PH2,
  CSCALE, VSCALE, EPS, COG, COGORD, COGPH, OC, OV, OEPS, TSTART, TSTEP, ZERO, CTRL, FRIC,
- CLAMP) = range(len(PARAMS))
+ CLAMP, ENCERR, EDGE0, EDGE1, EDGE2, EDGE3, ECC, ECCPH) = range(len(PARAMS))
 #: Rows of the integrator's output: joint angle and velocity, motor angle and velocity,
 #: transmitted (shaft) torque and commanded current.
 STATE = ("q", "qd", "theta_m", "w_m", "tau_s", "current")
@@ -112,6 +113,23 @@ def pack_params(**values) -> np.ndarray:
     if missing:
         raise ValueError(f"integrator parameters missing: {sorted(missing)}")
     return np.array([float(values[name]) for name in PARAMS])
+
+
+@compiled(types.float64(IN_F8, types.float64, types.float64))
+def encoder_count(P, th, step_angle):
+    """The count the encoder shows at motor angle ``th`` [rad], as a float: an ideal disc's
+    ``floor(th / step_angle)``, or with ``P[ENCERR]`` the disc read through its
+    eccentricity and count ``n`` starting at ``n + P[EDGE0 + n mod 4]`` counts
+    (:func:`rippleb.simulator.encoder.counts`, the same rule for the logged count)."""
+    if P[ENCERR] == 0.0:
+        return math.floor(th / step_angle)
+    x = (th + P[ECC] * math.sin(th + P[ECCPH])) / step_angle
+    n = math.floor(x)
+    if x < n + P[EDGE0 + int(n % 4.0)]:
+        return n - 1.0
+    if x >= n + 1.0 + P[EDGE0 + int((n + 1.0) % 4.0)]:
+        return n + 1.0
+    return n
 
 
 @compiled(types.float64(IN_F8, types.float64, types.float64))
@@ -223,12 +241,12 @@ def integrate(P, table, inputs, state0, out):
     friction_on, clamp = P[FRIC] != 0.0, P[CLAMP] != 0.0
     current = 0.0
     w_filtered = inputs[2, 0]
-    last_angle = math.floor(th / step_angle) * step_angle
+    last_angle = encoder_count(P, th, step_angle) * step_angle
     zero = P[ZERO]
     for k in range(n):
         tau = torque_of_twist((th - zero) / N - q, tau)
         if P[CTRL] != 0.0 and k % block == 0:
-            angle = math.floor(th / step_angle) * step_angle     # what the encoder counts
+            angle = encoder_count(P, th, step_angle) * step_angle     # what the encoder counts
             if k > 0:
                 w_filtered += P[VFILT] * ((angle - last_angle) / tick - w_filtered)
             last_angle = angle

@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from rippleb.scenario import REFERENCE_TEMPERATURE_C, Scenario
+from rippleb.mismatch import Unmodelled
+from rippleb.simulator import daq, gauge
 from rippleb.simulator.device import Device
 from rippleb.simulator.ripple import bridge_ripple
 
@@ -31,21 +33,34 @@ def quantise(values: np.ndarray, full_scale: float, bits: int) -> np.ndarray:
     return codes * step
 
 
-def strain_bridge(device: Device, sc: Scenario, t, theta_m, tau, noise, output_angle) -> np.ndarray:
+#: The physics of today's bridge: every knob of :mod:`rippleb.mismatch` off.
+IDEAL = Unmodelled().resolve(realistic=False)
+
+
+def strain_bridge(device: Device, sc: Scenario, t, theta_m, tau, noise, output_angle,
+                  knobs: Unmodelled = IDEAL) -> np.ndarray:
     """Bridge voltage (paper eq. 3-5): gain x (torque + ripple) + zero + drift + noise, ADC.
 
     The ripple is the wave-generator ripple plus the output-locked ripple and hysteresis
-    of :func:`rippleb.simulator.ripple.bridge_ripple`.
+    of :func:`rippleb.simulator.ripple.bridge_ripple`. ``knobs`` (resolved) add the
+    physics beyond the methods' models where it acts: the gauge's dynamics and the
+    ripple's shape (:func:`rippleb.simulator.gauge.wave_ripple`), the span and zero at the
+    gauge's temperature over the log, the amplifier's anti-alias filter and the drive's
+    PWM pickup (:func:`rippleb.simulator.daq.front_end`) before the ADC noise, and the
+    ADC's word length.
     """
-    zero = device.offset + device.offset_temp_coeff * (sc.temperature_c - REFERENCE_TEMPERATURE_C)
-    ripple = bridge_ripple(sc.ripple, device.seed, sc.temperature_c, device.ripple(theta_m, tau),
-                           output_angle, tau)
-    volts = (device.gain * (tau + ripple) + zero + device.drift_rate * t
-             + STRAIN_NOISE * noise.standard_normal(len(t)))
+    temperature = gauge.gauge_temperature(knobs, sc.temperature_c, t)
+    zero = device.offset + device.offset_temp_coeff * (temperature - REFERENCE_TEMPERATURE_C)
+    ripple = bridge_ripple(sc.ripple, device.seed, sc.temperature_c,
+                           gauge.wave_ripple(device, knobs, theta_m, tau, sc.spec), output_angle, tau)
+    analog = gauge.span(device, knobs, temperature) * (tau + ripple) + zero + device.drift_rate * t
+    if knobs.antialias_hz or knobs.pwm_mv:
+        analog = daq.front_end(analog, knobs, sc.spec.fs, device.seed, sc.name)
+    volts = analog + STRAIN_NOISE * noise.standard_normal(len(t))
     if sc.faults.bridge_drift:   # fault: extra bridge zero drift [V/s]
         volts = volts + sc.faults.bridge_drift * t
     # fault: a lower full scale (amplifier gain set too high) clips the peaks
-    return quantise(volts, sc.faults.strain_full_scale or STRAIN_RANGE, STRAIN_BITS)
+    return quantise(volts, sc.faults.strain_full_scale or STRAIN_RANGE, knobs.adc_bits)
 
 
 def current_sense(sc: Scenario, commanded: np.ndarray, offset: float, noise) -> np.ndarray:

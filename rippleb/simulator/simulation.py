@@ -30,8 +30,10 @@ import numpy as np
 from rippleb.data import JointSpec, SensorLog
 from rippleb.scenario import Scenario, load_scenario
 from rippleb.simulator import conditions, controller
-from rippleb.simulator.conditions import DEFAULT_CONDITION, check_condition, stable_hash
+from rippleb.mismatch import describe
+from rippleb.simulator.conditions import DEFAULT_CONDITION, calibration_condition, check_condition, stable_hash
 from rippleb.simulator.device import Device, check_seed
+from rippleb.simulator.encoder import EncoderErrors, counts, missed_counts
 from rippleb.simulator.joint import load_table
 from rippleb.simulator.sensors import current_sense, dropouts, encoder_faults, strain_bridge
 
@@ -73,7 +75,8 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     ``condition`` (see :mod:`rippleb.conditions`) says what happened to the device since
     its calibration session; ``same-session`` is the device as calibrated. A scenario with
     ``scored = false`` (``calibration``) is that calibration session, the same under
-    every condition.
+    every deployment condition; ``realistic`` (the joint with the physics no method
+    models, :mod:`rippleb.mismatch`) acts on it too.
     """
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     seed = check_seed(seed)
@@ -92,20 +95,29 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     # eq. (7) as a controller computes it: desired trajectory, nominal (identified) model
     nominal = load_table(sc, q_d, nominal_seed=seed)
     tau_ref = nominal.model_torque(q_d, trajectory[2]) + sc.external_torque(t, known_only=True)
-    gains = controller.design_gains(spec, float(np.mean(nominal.inertia)))
+    # the physics beyond the methods' models: the scenario's knobs, the rest at their
+    # documented magnitudes under `realistic`, off otherwise (rippleb/mismatch.py)
+    knobs = sc.unmodelled.resolve(realistic=session.realistic)
+    errors = EncoderErrors.draw(seed, knobs, spec.counts_per_rev)
+    gains = controller.design_gains(spec, float(np.mean(nominal.inertia)), knobs.bandwidth_factor)
     state = controller.run(spec, device, sc.temperature_c, load_table(sc, q_d), gains, t, trajectory,
-                           tau_ref - _excitation(sc, t), sc.external_torque(t))
+                           tau_ref - _excitation(sc, t), sc.external_torque(t), encoder=errors)
     q, qd, theta_m, _, tau_true, commanded = state
 
-    strain = strain_bridge(device, sc, t, theta_m, tau_true, noise, output_angle=q)
+    strain = strain_bridge(device, sc, t, theta_m, tau_true, noise, output_angle=q, knobs=knobs)
     current = current_sense(sc, commanded, device.current_offset, noise)
-    absolute = np.floor(theta_m / (2 * np.pi) * spec.counts_per_rev).astype(np.int64)
+    absolute = counts(theta_m, spec.counts_per_rev, errors)
     index = conditions.index_pulses(absolute, conditions.index_count(seed, spec.counts_per_rev),
                                     spec.counts_per_rev)
+    if knobs.missed:   # the DAQ's counter loses edges: its count drifts off the disc's
+        absolute = missed_counts(absolute, knobs.missed, seed, sc.name)
     # An incremental counter counts from wherever it stood when the log started.
     encoder = absolute if session.counter_start is None else absolute - absolute[0] + session.counter_start
-    # the calibration session is the first session whatever the condition asked for
-    meta = {"scenario": sc.name, "seed": seed, "condition": condition if sc.scored else DEFAULT_CONDITION}
+    # the calibration session is the first session whatever a deployment condition asked for
+    meta = {"scenario": sc.name, "seed": seed,
+            "condition": condition if sc.scored else calibration_condition(condition)}
+    if knobs.active:
+        meta["unmodelled"] = describe(knobs)
     if sc.faults.active:
         # Own generator: a faulty scenario's healthy signals stay those of the same
         # scenario without faults, and scenarios without faults are untouched.

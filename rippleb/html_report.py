@@ -85,6 +85,11 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
             "<h2>Method x condition: mean RMS error over the scenarios [Nm]</h2>",
             _markdown_table(condition_summary_markdown(frame)),
             "<ul>" + "".join(f"<li>{_md(s)}</li>" for s in condition_headline(frame)) + "</ul>"]
+    if frame["condition"].nunique() > 1:
+        from rippleb.verdicts import method_verdicts
+
+        body += ["<h3>Each method in plain words</h3>",
+                 "<ul>" + "".join(f"<li>{_md(v)}</li>" for v in method_verdicts(frame)) + "</ul>"]
     body += ["<h2>Every row</h2>", '<p class="note">One point per row (device); hover for method, '
              "scenario, condition and seed; drag to zoom, double-click to reset.</p>", divs[0],
              "<h2>Accuracy against per-tick cost</h2>", divs[1]]

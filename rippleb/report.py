@@ -26,6 +26,7 @@ from rippleb.provenance import (collect_provenance, environment_sentence, enviro
                                 provenance_markdown,  # noqa: F401
                                 read_run_provenance, seeds_text)
 from rippleb.results import swept_columns
+from rippleb.verdicts import method_verdicts
 from rippleb.stats import (CONFIDENCE, METHOD_ORDER, fmt_interval, interval_frame,  # noqa: F401
                            method_order, scenario_order, t_interval, with_condition)
 from rippleb.table_one import (PAPER_CITATION, PAPER_TABLE_I, TABLE_I_METHODS,  # noqa: F401
@@ -52,6 +53,11 @@ def load_rows(run_dir):
     return frame
 
 
+def frame_condition_count(frame) -> int:
+    """How many deployment conditions the rows hold (a file without the column: one)."""
+    return int(frame["condition"].nunique()) if "condition" in frame else 1
+
+
 def tables_markdown(frame) -> str:
     """The README's tables and their sentences: a pure function of the rows, so
     ``tests/test_published.py`` can regenerate it and find it in ``results/README.md``."""
@@ -61,6 +67,12 @@ def tables_markdown(frame) -> str:
              "that condition; then mean ± 95 % t-interval over seeds.", "",
              condition_summary_markdown(frame), ""]
     parts += [f"- {s}" for s in condition_headline(frame)] + [""]
+    verdicts = method_verdicts(frame)
+    if verdicts and frame_condition_count(frame) > 1:
+        parts += ["### Each method in plain words", "",
+                  "Where it wins and where it breaks, from the table above; why, from what the "
+                  "method assumes of the ripple (its page under docs/methods/).", ""]
+        parts += [f"- {v}" for v in verdicts] + [""]
     for condition, rows in by_condition(frame):
         parts += _condition_section(condition, rows, source)
     parts += ["## Rows that did not finish ok", "", failed_markdown(frame)]

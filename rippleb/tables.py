@@ -314,11 +314,14 @@ def condition_summary_markdown(frame, column: str = "rms_error_nm") -> str:
         return "(no ok rows)"
     conditions = condition_order(table["condition"].unique())
     cells = {(r.condition, r.method): fmt_interval(r.mean, r.half) for r in table.itertuples()}
+    worst = table.dropna(subset=["mean"]).sort_values("mean").groupby("method").last()
     rows = [[m] + [cells.get((c, m), "n/a") for c in conditions]
+            + ([f"{fmt_interval(worst.loc[m, 'mean'], worst.loc[m, 'half'])} ({worst.loc[m, 'condition']})"
+                if m in worst.index else "n/a"] if len(conditions) > 1 else [])
             for m in method_order(table["method"].unique())]
     counts = table.groupby("condition")["scenarios"].first()
     heads = [f"{c} ({plural(int(counts[c]), 'scenario')})" for c in conditions]
-    return markdown(rows, ["method"] + heads)
+    return markdown(rows, ["method"] + heads + (["worst case over the conditions"] if len(conditions) > 1 else []))
 
 
 def condition_headline(frame, column: str = "rms_error_nm") -> list[str]:

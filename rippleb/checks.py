@@ -1,7 +1,7 @@
 """Range checks of options and inputs: one :class:`~rippleb.errors.InputError` line each.
 
 Options (job count, timeout, memory limit), scenarios (finite posture and trajectory,
-position and velocity limits of the URDF joint) and recorded logs (the sample rate given by
+position and velocity limits of the URDF joint, physical bounds) and recorded logs (the sample rate given by
 ``t``; a calibration log's length and rate).
 """
 
@@ -29,11 +29,16 @@ def check_options(*, jobs, timeout, memory_mb) -> None:
 
 
 def check_scenario(scenario) -> None:
-    """Refuse a scenario outside the joint's position or speed limits, or not finite."""
+    """Refuse a scenario outside the joint's position or speed limits, or not finite, or
+    out of physical bounds (:func:`rippleb.simulator.validity.check_bounds`: posture,
+    motor speed and acceleration, loads, segment count; checked first, as the trajectory's
+    dense sampling costs segments squared)."""
     from rippleb.simulator import robot as arm
+    from rippleb.simulator.validity import check_bounds
 
     model = arm.load_model(scenario.robot)
     joint = model.joints[model.getJointId(scenario.joint)]
+    check_bounds(scenario, model)
     check_trajectory(scenario, float(model.velocityLimit[joint.idx_v]))
 
 

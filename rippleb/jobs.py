@@ -71,14 +71,16 @@ def simulate_case(scenario, seed: int, condition: str, paths: dict) -> bytes:
     """Simulate once; store the visible log of each role in ``paths`` (role -> path).
 
     Returns :func:`rippleb.cache.pack` bytes: the truth arrays and, in ``info``, the
-    ``fs`` and each role's artefact (path and hash).
+    ``fs``, each role's artefact (path and hash) and ``invalid``: why the log is not a
+    joint that exists (:func:`rippleb.simulator.validity.check_simulation`), or ''.
     """
     from rippleb.simulator import simulate
+    from rippleb.simulator.validity import check_simulation
 
     sim = simulate(scenario, seed, condition=condition)
     truth = Truth.from_simulation(sim)
     artefacts = {role: _store_log(path, visible_log(sim.log, role)) for role, path in paths.items()}
-    return truth_message(truth, artefacts, sim.log.spec.block_size)
+    return truth_message(truth, artefacts, sim.log.spec.block_size, check_simulation(sim) or "")
 
 
 def _store_log(path, log: SensorLog) -> dict:
@@ -86,10 +88,11 @@ def _store_log(path, log: SensorLog) -> dict:
     return {"path": artefact.path, "sha256": artefact.sha256}
 
 
-def truth_message(truth: Truth, artefacts: dict, block_size: int) -> bytes:
-    """The truth, the tick size and the artefacts of one case as message bytes."""
+def truth_message(truth: Truth, artefacts: dict, block_size: int, invalid: str = "") -> bytes:
+    """The truth, the tick size, the artefacts and the validity of one case as message bytes."""
     arrays = {name: getattr(truth, name) for name in TRUTH_ARRAYS}
-    return pack(arrays, {"fs": truth.fs, "block_size": int(block_size), "artefacts": artefacts})
+    return pack(arrays, {"fs": truth.fs, "block_size": int(block_size), "artefacts": artefacts,
+                         "invalid": invalid})
 
 
 def truth_from_message(arrays: dict, info: dict) -> Truth:

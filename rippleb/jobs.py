@@ -187,3 +187,25 @@ def check_estimate(arrays: dict, n_samples: int, n_ticks: int) -> tuple[np.ndarr
     if ticks.dtype.kind not in "iu" or ticks.shape != (n_ticks,):
         return f"tick times of shape {ticks.shape}, expected {n_ticks}"
     return estimate, ticks
+
+
+def score_or_invalid(estimate: np.ndarray, truth: Truth) -> dict:
+    """The accuracy columns of an estimate (:func:`rippleb.metrics.score`), or, when they
+    cannot stand as an ``ok`` row, ``{"status": "invalid", "message": why}``.
+
+    Every accuracy column must be finite or NaN (NaN: not defined for this log, e.g. no
+    ``torque_true`` in a recording), and the errors against each reference the log has must
+    be finite. A finite estimate can still overflow them (a strain scaled by 1e306 gave
+    ``rms_error_ref_nm = inf``); the overflow itself is expected here, hence no warning.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        scores = metrics.score(estimate, truth)
+    needed = {c for c, ref in (("rms_error_nm", truth.torque_true), ("max_error_nm", truth.torque_true),
+                                ("rms_error_ref_nm", truth.torque_ref), ("max_error_ref_nm", truth.torque_ref))
+              if ref is not None}
+    bad = [f"{c} = {v}" for c, v in scores.items() if np.isinf(v) or (c in needed and not np.isfinite(v))]
+    if bad:
+        return {"status": "invalid", "message": f"its scores are not finite ({', '.join(bad)}): the estimate "
+                                                f"or the log is beyond what float64 can score"}
+    return scores
+

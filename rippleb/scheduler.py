@@ -18,7 +18,7 @@ from pathlib import Path
 from rippleb import jobs as job_fns
 from rippleb.cache import Artefact, TamperedError, digest, load_log, log_bytes, store, unpack
 from rippleb.data import SensorLog
-from rippleb.metrics import score, tick_stats
+from rippleb.metrics import tick_stats
 from rippleb.pool import Pool
 from rippleb.registry import Registry, one_line
 from rippleb.results import ENVIRONMENT, STATUSES, ResultsFile, RunWarning, system_info
@@ -289,8 +289,9 @@ def _score_row(value: bytes, state: State, case: Case) -> dict:
         return {**fields, "status": "invalid", "message": checked}
     estimate, ticks = checked
     fields["n_samples"] = n_samples
-    fields.update(score(estimate, truth))
-    fields.update(tick_stats(ticks, n_samples))
+    fields.update(job_fns.score_or_invalid(estimate, truth))
+    if fields["status"] == "ok":
+        fields.update(tick_stats(ticks, n_samples))
     return fields
 
 

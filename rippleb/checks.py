@@ -36,16 +36,17 @@ def check_options(*, jobs, timeout, memory_mb) -> None:
 
 def check_scenario(scenario) -> None:
     """Refuse a scenario outside the joint's position or speed limits, or not finite, or
-    out of physical bounds (:func:`rippleb.simulator.validity.check_bounds`: posture,
-    motor speed and acceleration, loads, segment count; checked first, as the trajectory's
-    dense sampling costs segments squared)."""
+    out of physical bounds (:mod:`rippleb.simulator.validity`): the segment and load counts,
+    posture and loads first, as the trajectory's dense sampling costs segments squared; the
+    exact peak speed and acceleration of each segment last."""
     from rippleb.simulator import robot as arm
-    from rippleb.simulator.validity import check_bounds
+    from rippleb.simulator.validity import check_bounds, check_motion
 
     model = arm.load_model(scenario.robot)
     joint = model.joints[model.getJointId(scenario.joint)]
     check_bounds(scenario, model)
     check_trajectory(scenario, float(model.velocityLimit[joint.idx_v]))
+    check_motion(scenario, model)
 
 
 def check_recording(log: SensorLog, name: str) -> None:

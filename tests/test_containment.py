@@ -76,7 +76,7 @@ def test_the_memory_limit_binds_the_worker_and_nothing_else():
     while run.worker is None:  # the keeper names its worker once it has forked it
         pool._collect()
         time.sleep(0.01)
-    keeper_limits, worker_limits = _address_space_limit(run.keeper), _address_space_limit(run.worker)
+    keeper_limits = _address_space_limit(run.keeper)   # the worker reports its own below
     finished = []
     while not finished:
         finished = pool.wait()
@@ -84,8 +84,6 @@ def test_the_memory_limit_binds_the_worker_and_nothing_else():
     report = json.loads(finished[0].value)
     assert report["soft"] == report["hard"] != resource.RLIM_INFINITY   # the hard limit is the cap
     assert not report["lifted"] and not report["allocated"]
-    soft, hard = worker_limits.split()
-    assert soft == hard != "unlimited"
     # rippleb's own processes keep their limits: the keeper and this (runner) process
     assert keeper_limits == " ".join("unlimited" if v == resource.RLIM_INFINITY else str(v) for v in before)
     assert resource.getrlimit(resource.RLIMIT_AS) == before

@@ -2,11 +2,11 @@
 
 Two checks, each bound with its source here and in ``docs/physics.md`` ("Physical validity"):
 
-* :func:`check_bounds`, before anything runs (``rippleb run``, ``sweep`` and ``simulate``
-  call it through :func:`rippleb.checks.check_scenario`): a scenario that asks for what the
-  joint cannot do is refused with one line naming its file and field: a held joint outside
-  its limits, a move too fast for the motor, loads beyond the drive's peak torque, more
-  segments or loads than a scenario is meant to hold.
+* :func:`check_bounds` and :func:`check_motion`, before anything runs (``rippleb run``,
+  ``sweep`` and ``simulate`` call them through :func:`rippleb.checks.check_scenario`): a
+  scenario that asks for what the joint cannot do is refused with one line naming its file
+  and field: more segments or loads than a scenario is meant to hold, a held joint outside
+  its limits, loads beyond the drive's peak torque, a move too fast for the motor.
 * :func:`check_simulation`, once per simulated log (:func:`rippleb.jobs.simulate_case`):
   a log whose true torque leaves the drive's repeated peak torque, or whose strain clips at
   the ADC, is not a joint that exists (a closed loop that went unstable, e.g. at a 100 Hz
@@ -54,7 +54,10 @@ def peak_torque(spec) -> float:
 
 
 def check_bounds(scenario, model) -> None:
-    """Refuse a scenario that asks for what the joint cannot do, with one line.
+    """Refuse a scenario whose size, posture or loads are out of physical bounds, with one line.
+
+    Called before the trajectory is sampled (whose cost grows with the segment count
+    squared); :func:`check_motion` follows it.
 
     Parameters
     ----------
@@ -71,7 +74,6 @@ def check_bounds(scenario, model) -> None:
     _check_counts(scenario)
     _check_posture(scenario, model)
     _check_loads(scenario)
-    _check_motion(scenario, model)
 
 
 def _check_counts(scenario) -> None:
@@ -132,9 +134,14 @@ def _load_times(scenario) -> np.ndarray:
     return np.unique(t[(t >= 0.0) & (t <= scenario.duration)])
 
 
-def _check_motion(scenario, model) -> None:
-    """Each segment's peak speed within the joint's URDF velocity limit, and its peak
-    acceleration within what the motor can give at the current limit."""
+def check_motion(scenario, model) -> None:
+    """Refuse a segment whose exact peak speed exceeds the joint's URDF velocity limit, or
+    whose peak acceleration exceeds what the motor gives at its current limit.
+
+    The sampled trajectory check (:func:`rippleb.rows.check_trajectory`) can step over a
+    short segment (a move of 1e-300 s has no sample); the peaks here come from the
+    segment's formula. Arguments and error as :func:`check_bounds`.
+    """
     spec = scenario.spec
     joint = model.joints[model.getJointId(scenario.joint)]
     speed_limit = float(model.velocityLimit[joint.idx_v])

@@ -1,8 +1,9 @@
 """Range checks of options and inputs: one :class:`~rippleb.errors.InputError` line each.
 
 Options (job count, timeout, memory limit), scenarios (finite posture and trajectory,
-position and velocity limits of the URDF joint) and recorded logs (the sample rate given by
-``t``; a calibration log's length and rate).
+position and velocity limits of the URDF joint, physical bounds) and recorded logs (the sample
+rate given by ``t``, the length a log needs to be scored; a calibration log's length, rate and
+reference).
 """
 
 from __future__ import annotations
@@ -13,10 +14,15 @@ import numpy as np
 
 from rippleb.data import SensorLog
 from rippleb.errors import InputError
+from rippleb.metrics import MAX_DELAY_S
 from rippleb.rows import check_trajectory
 
 MIN_FS, MAX_FS = 100.0, 1e6
 MIN_CALIBRATION_S = 1.0
+#: Shortest recording that can be scored [s]: twice the 100 ms of lags ``delay_ms`` searches
+#: (:data:`rippleb.metrics.MAX_DELAY_S`), so that at its largest lag the estimate and the
+#: reference still overlap for as long as they are shifted; 4000 samples at 20 kHz.
+MIN_SCORED_S = 2 * MAX_DELAY_S
 
 
 def check_options(*, jobs, timeout, memory_mb) -> None:
@@ -29,12 +35,18 @@ def check_options(*, jobs, timeout, memory_mb) -> None:
 
 
 def check_scenario(scenario) -> None:
-    """Refuse a scenario outside the joint's position or speed limits, or not finite."""
+    """Refuse a scenario outside the joint's position or speed limits, or not finite, or
+    out of physical bounds (:mod:`rippleb.simulator.validity`): the segment and load counts,
+    posture and loads first, as the trajectory's dense sampling costs segments squared; the
+    exact peak speed and acceleration of each segment last."""
     from rippleb.simulator import robot as arm
+    from rippleb.simulator.validity import check_bounds, check_motion
 
     model = arm.load_model(scenario.robot)
     joint = model.joints[model.getJointId(scenario.joint)]
+    check_bounds(scenario, model)
     check_trajectory(scenario, float(model.velocityLimit[joint.idx_v]))
+    check_motion(scenario, model)
 
 
 def check_recording(log: SensorLog, name: str) -> None:
@@ -44,6 +56,25 @@ def check_recording(log: SensorLog, name: str) -> None:
         hint = " (is t in seconds?)" if fs < MIN_FS else ""
         raise InputError(f"{name}: column t gives a sample rate of {fs:.6g} Hz, outside the plausible "
                          f"{MIN_FS:g} Hz - {MAX_FS:g} Hz for a joint torque sensor{hint}")
+
+
+def check_scored_length(log: SensorLog, name: str) -> None:
+    """Refuse a recording too short to score (:data:`MIN_SCORED_S`)."""
+    fs = rate_from_t(log)
+    needed = math.ceil(MIN_SCORED_S * fs - 1e-6)
+    if len(log) < needed:
+        raise InputError(f"{name}: {len(log)} samples ({len(log) / fs:.3g} s) is too short to score; a log "
+                         f"needs at least {MIN_SCORED_S:g} s ({needed} samples at {fs:.6g} Hz), twice the "
+                         f"{1000 * MAX_DELAY_S:g} ms of lags delay_ms searches")
+
+
+def check_reference(cal: SensorLog, name: str) -> None:
+    """Refuse a calibration log whose ``torque_ref`` never changes: a method fits its gain
+    against it, and a constant (an all-zero column) gives it nothing to fit."""
+    ref = cal.torque_ref
+    if ref is not None and len(ref) and ref.min() == ref.max():
+        raise InputError(f"{name}: column torque_ref is {ref[0]:g} Nm throughout; a calibration needs a "
+                         f"reference torque that varies (methods fit their gain against it)")
 
 
 def check_calibration(cal: SensorLog, name: str, scored: SensorLog) -> None:

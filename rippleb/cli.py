@@ -459,6 +459,7 @@ def cmd_simulate(args) -> int:
     from rippleb.runner import check_scenario
     from rippleb.scenario import load_scenario
     from rippleb.simulator import simulate
+    from rippleb.simulator.validity import check_simulation
 
     if args.seed < 0:
         raise InputError(f"--seed must be a non-negative integer, got {args.seed}")
@@ -470,6 +471,9 @@ def cmd_simulate(args) -> int:
         raise InputError(f"--condition {args.condition}: {exc}") from None
     path = write_log(sim.log, args.out)
     print(f"wrote {path}")
+    unphysical = check_simulation(sim)
+    if unphysical:  # written all the same: it is what was asked for, and shows what went wrong
+        print(f"rippleb: warning: {path}: not a joint that exists: {unphysical}", file=sys.stderr)
     return 0
 
 

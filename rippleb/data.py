@@ -34,6 +34,13 @@ SENSOR_COLUMNS = ("t", "strain", "encoder", "current")
 OPTIONAL_SENSOR_COLUMNS = ("index",)
 TRUTH_COLUMNS = ("torque_true", "torque_ref")
 LOG_COLUMNS = SENSOR_COLUMNS + OPTIONAL_SENSOR_COLUMNS + TRUTH_COLUMNS
+#: Largest encoder count a log may hold: 2^53, the largest integer below which a float64
+#: (how a log's columns are read and checked) holds every integer exactly.
+MAX_EXACT_COUNT = 2**53
+#: The smallest normal float64 (2.2e-308). Below it a value is subnormal: it has lost
+#: precision, and no instrument reads such a value (the strain ADC steps by 3e-4 V), so a
+#: column holding one was scaled or corrupted, and would be scored as if it were zero.
+SMALLEST_NORMAL = float(np.finfo(float).tiny)
 
 
 @dataclass(frozen=True)
@@ -164,8 +171,9 @@ def make_log(spec: JointSpec, columns: dict, *, source: str = "log", meta: dict 
     """Build a :class:`SensorLog` from columns after checking the schema.
 
     Raises :class:`~rippleb.errors.InputError` naming ``source`` and the column for a
-    missing column, an empty log, NaN or infinite values, non-integer encoder counts,
-    or time stamps that do not strictly increase.
+    missing column, an empty log, a true/false column (but ``index``), NaN, infinite or
+    subnormal values, non-integer encoder counts or counts beyond :data:`MAX_EXACT_COUNT`, or time
+    stamps that do not strictly increase.
     """
     missing = [name for name in SENSOR_COLUMNS if name not in columns]
     if missing:
@@ -175,8 +183,11 @@ def make_log(spec: JointSpec, columns: dict, *, source: str = "log", meta: dict 
     for name in LOG_COLUMNS:
         if name not in columns or columns[name] is None:
             continue
+        raw = np.asarray(columns[name])
+        if name != "index" and _holds_booleans(raw):  # True/False would pass as 1.0/0.0
+            raise InputError(f"{source}: column {name} holds true/false values, not numbers")
         try:
-            arrays[name] = np.asarray(columns[name], dtype=float)
+            arrays[name] = np.asarray(raw, dtype=float)
         except (TypeError, ValueError):
             raise InputError(f"{source}: column {name} is not numeric") from None
     n = len(arrays["t"])
@@ -189,6 +200,12 @@ def make_log(spec: JointSpec, columns: dict, *, source: str = "log", meta: dict 
         if bad.any():
             raise InputError(f"{source}: column {name} holds NaN or infinite values "
                              f"(first at row {int(np.argmax(bad))})")
+        tiny = (values != 0) & (np.abs(values) < SMALLEST_NORMAL)
+        if tiny.any():
+            row = int(np.argmax(tiny))
+            raise InputError(f"{source}: column {name} holds subnormal values ({values[row]:.3g} at row {row}), "
+                             f"below the smallest normal float64 ({SMALLEST_NORMAL:.3g}): no sensor reads that; "
+                             f"is the column scaled?")
     steps = np.diff(arrays["t"])
     if (steps <= 0).any():
         row = int(np.argmax(steps <= 0)) + 1
@@ -200,12 +217,40 @@ def make_log(spec: JointSpec, columns: dict, *, source: str = "log", meta: dict 
     encoder = arrays["encoder"]
     if not np.array_equal(encoder, np.round(encoder)):
         raise InputError(f"{source}: column encoder must hold integer counts")
+    if np.abs(encoder).max() > MAX_EXACT_COUNT:
+        raise InputError(f"{source}: column encoder reaches {np.abs(encoder).max():.4g} counts, beyond "
+                         f"+-2^53 ({MAX_EXACT_COUNT:.4g}), the largest integers a float64 holds exactly: "
+                         f"neighbouring counts there cannot be told apart")
     arrays["encoder"] = encoder.astype(np.int64)
     if "index" in arrays:
         if not np.isin(arrays["index"], (0.0, 1.0)).all():
             raise InputError(f"{source}: column index must hold 0 or 1 (the encoder's index pulse)")
         arrays["index"] = arrays["index"].astype(np.int8)
     return SensorLog(spec=spec, meta=dict(meta or {}), **arrays)
+
+
+def _holds_booleans(values: np.ndarray) -> bool:
+    """True for a boolean column (numpy's, or pandas' nullable one, which arrives as objects)."""
+    if values.dtype.kind == "b":
+        return True
+    return values.dtype.kind == "O" and any(isinstance(v, (bool, np.bool_)) for v in values)
+
+
+def _duplicated_columns(path: Path, suffix: str) -> list[str]:
+    """The log columns named more than once in the file's header (pandas would rename the
+    second ``strain`` to ``strain.1`` and read the first alone; Arrow refuses to choose)."""
+    try:
+        if suffix == ".csv":
+            import pandas as pd
+
+            names = [str(n) for n in pd.read_csv(path, header=None, nrows=1, dtype=str).iloc[0]]
+        else:
+            import pyarrow.parquet as pq
+
+            names = pq.read_schema(path).names
+    except Exception:  # noqa: BLE001 - unreadable: the read itself says why, naming the file
+        return []
+    return sorted({n for n in names if n in LOG_COLUMNS and names.count(n) > 1})
 
 
 def read_log(path: str | Path, spec: JointSpec | None = None) -> SensorLog:
@@ -228,6 +273,9 @@ def read_log(path: str | Path, spec: JointSpec | None = None) -> SensorLog:
         raise InputError(f"{path}: unsupported log format {suffix or '(none)'!r}; use .csv or .parquet")
     if not path.is_file():
         raise InputError(f"{path}: no such file")
+    twice = _duplicated_columns(path, suffix)
+    if twice:
+        raise InputError(f"{path}: column {', '.join(twice)} appears more than once; keep one")
     try:
         frame = pd.read_csv(path) if suffix == ".csv" else pd.read_parquet(path)
     except Exception as exc:  # pandas raises many types for unreadable files

@@ -63,7 +63,8 @@ def run_task(task: RowTask, cache: Path, registry, memo: dict | None = None, ser
         The methods this machine can load.
     memo
         Simulations and fits of earlier rows in this process, read and filled:
-        ``Case -> (artefact, truth, lengths, verified visible log)`` and ``Fit -> fit info``; an entry is used
+        ``Case -> (artefact, truth, lengths, verified visible log, why it is unphysical or None)``
+        and ``Fit -> fit info``; an entry is used
         only while its file exists (and files are checked by hash when read).
     server
         The :class:`rippleb.forkserver.ForkServer` that forks the row's jobs (one started
@@ -92,7 +93,8 @@ def run_task(task: RowTask, cache: Path, registry, memo: dict | None = None, ser
     schedule(Pool(1, task.memory_mb, context=registry, server=server), state, _NoBar())
     for c in (case, cal_case):
         if c in state.artefacts and (c.role == FITTING or c in state.truths):
-            memo[c] = (state.artefacts[c], state.truths.get(c), state.lengths.get(c), state.logs.get(c))
+            memo[c] = (state.artefacts[c], state.truths.get(c), state.lengths.get(c), state.logs.get(c),
+                       state.invalid.get(c))
     for fit, info in state.fits.items():
         if isinstance(info, dict) and info.get("status") == "ok" and isinstance(info.get("fitted"), dict):
             memo[fit] = info
@@ -106,9 +108,11 @@ def _restore(state, memo: dict) -> None:
         known = [memo.get(Case(*sim, role)) for role in roles]
         if not all(k is not None and Path(k[0].path).is_file() for k in known):
             continue
-        for role, (artefact, truth, lengths, log) in zip(roles, known):
+        for role, (artefact, truth, lengths, log, invalid) in zip(roles, known):
             c = Case(*sim, role)
             state.artefacts[c] = artefact
+            if invalid is not None:
+                state.invalid[c] = invalid
             if truth is not None:
                 state.truths[c] = truth
             if log is not None:  # read and verified by an earlier row here

@@ -71,14 +71,16 @@ def simulate_case(scenario, seed: int, condition: str, paths: dict) -> bytes:
     """Simulate once; store the visible log of each role in ``paths`` (role -> path).
 
     Returns :func:`rippleb.cache.pack` bytes: the truth arrays and, in ``info``, the
-    ``fs`` and each role's artefact (path and hash).
+    ``fs``, each role's artefact (path and hash) and ``invalid``: why the log is not a
+    joint that exists (:func:`rippleb.simulator.validity.check_simulation`), or ''.
     """
     from rippleb.simulator import simulate
+    from rippleb.simulator.validity import check_simulation
 
     sim = simulate(scenario, seed, condition=condition)
     truth = Truth.from_simulation(sim)
     artefacts = {role: _store_log(path, visible_log(sim.log, role)) for role, path in paths.items()}
-    return truth_message(truth, artefacts, sim.log.spec.block_size)
+    return truth_message(truth, artefacts, sim.log.spec.block_size, check_simulation(sim) or "")
 
 
 def _store_log(path, log: SensorLog) -> dict:
@@ -86,10 +88,11 @@ def _store_log(path, log: SensorLog) -> dict:
     return {"path": artefact.path, "sha256": artefact.sha256}
 
 
-def truth_message(truth: Truth, artefacts: dict, block_size: int) -> bytes:
-    """The truth, the tick size and the artefacts of one case as message bytes."""
+def truth_message(truth: Truth, artefacts: dict, block_size: int, invalid: str = "") -> bytes:
+    """The truth, the tick size, the artefacts and the validity of one case as message bytes."""
     arrays = {name: getattr(truth, name) for name in TRUTH_ARRAYS}
-    return pack(arrays, {"fs": truth.fs, "block_size": int(block_size), "artefacts": artefacts})
+    return pack(arrays, {"fs": truth.fs, "block_size": int(block_size), "artefacts": artefacts,
+                         "invalid": invalid})
 
 
 def truth_from_message(arrays: dict, info: dict) -> Truth:
@@ -184,3 +187,25 @@ def check_estimate(arrays: dict, n_samples: int, n_ticks: int) -> tuple[np.ndarr
     if ticks.dtype.kind not in "iu" or ticks.shape != (n_ticks,):
         return f"tick times of shape {ticks.shape}, expected {n_ticks}"
     return estimate, ticks
+
+
+def score_or_invalid(estimate: np.ndarray, truth: Truth) -> dict:
+    """The accuracy columns of an estimate (:func:`rippleb.metrics.score`), or, when they
+    cannot stand as an ``ok`` row, ``{"status": "invalid", "message": why}``.
+
+    Every accuracy column must be finite or NaN (NaN: not defined for this log, e.g. no
+    ``torque_true`` in a recording), and the errors against each reference the log has must
+    be finite. A finite estimate can still overflow them (a strain scaled by 1e306 gave
+    ``rms_error_ref_nm = inf``); the overflow itself is expected here, hence no warning.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        scores = metrics.score(estimate, truth)
+    needed = {c for c, ref in (("rms_error_nm", truth.torque_true), ("max_error_nm", truth.torque_true),
+                                ("rms_error_ref_nm", truth.torque_ref), ("max_error_ref_nm", truth.torque_ref))
+              if ref is not None}
+    bad = [f"{c} = {v}" for c, v in scores.items() if np.isinf(v) or (c in needed and not np.isfinite(v))]
+    if bad:
+        return {"status": "invalid", "message": f"its scores are not finite ({', '.join(bad)}): the estimate "
+                                                f"or the log is beyond what float64 can score"}
+    return scores
+

@@ -4,10 +4,10 @@ Why not joblib or multiprocessing: a method that sleeps forever, allocates witho
 forks, or signals its process group must cost exactly its own row. Every job therefore
 runs in its own pair of forked processes (see :mod:`rippleb.isolation`): a *keeper*
 (rippleb's code: new session, new PID namespace where permitted, child subreaper) and
-the *worker* it forks, which runs the job with a memory limit (``RLIMIT_AS``), with
-every inherited file descriptor closed but its result pipe, and with its output going
-to a file. At the job's deadline, or when the job ends, the worker and everything it
-started are killed.
+the *worker* it forks, which runs the job with a memory limit (``RLIMIT_AS``, soft and
+hard, so the job cannot lift it), with every inherited file descriptor closed but its
+result pipe, and with its output going to a file. At the job's deadline, or when the job
+ends, the worker and everything it started are killed.
 
 In a local run the keepers are forked by a fork server (:mod:`rippleb.forkserver`) that
 was forked before the first simulation, so no job's memory holds a truth; without a server
@@ -402,6 +402,12 @@ def _limit_memory(memory_mb: float | None) -> None:
     RLIMIT_AS counts the mappings inherited from the parent (numpy, scipy, Pinocchio
     and their thread stacks reserve much address space), so an absolute cap would be
     meaningless; the cap is relative to the size at fork time.
+
+    Both the soft and the hard limit are set: an unprivileged process may raise its soft
+    limit up to its hard one, so a soft cap alone is one ``setrlimit`` call away from
+    gone (issue 25: a plugin lifted it and held 1.5 GiB under ``--memory-limit 200``).
+    Lowering the hard limit cannot be undone without privileges. The call happens only
+    here, in the forked worker: the keeper, the fork server and the runner keep theirs.
     """
     if memory_mb is None:
         return
@@ -412,6 +418,6 @@ def _limit_memory(memory_mb: float | None) -> None:
         _, hard = resource.getrlimit(resource.RLIMIT_AS)
         if hard != resource.RLIM_INFINITY:
             limit = min(limit, hard)
-        resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
     except (OSError, ValueError):
         pass  # not Linux: run without a memory limit rather than refuse to run

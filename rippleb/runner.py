@@ -37,12 +37,13 @@ import numpy as np
 from rippleb import jobs as job_fns
 from rippleb import numerics
 from rippleb.cache import digest, log_bytes
-from rippleb.checks import check_calibration, check_options, check_recording, check_scenario
+from rippleb.checks import (check_calibration, check_options, check_recording, check_reference, check_scenario,
+                            check_scored_length)
 from rippleb.simulator.conditions import DEFAULT_CONDITION, calibration_condition
 from rippleb.data import SensorLog
 from rippleb.errors import InputError
 from rippleb.forkserver import ForkServer
-from rippleb.metrics import Truth, score, tick_stats
+from rippleb.metrics import Truth, tick_stats
 from rippleb.pool import Pool
 from rippleb.registry import Registry
 from rippleb.executors import row_tasks
@@ -215,6 +216,8 @@ def run_log(log, calibration=None, methods=None, *, jobs: int = 1, out=None,
             raise InputError(f"{label}: a calibration log needs a torque_ref column")
         check_recording(cal, label)
         check_calibration(cal, label, log)
+    check_scored_length(log, log_name)
+    check_reference(cal, log_name if calibration is None else label)
     registry = Registry.discover()
     names = resolve_methods(registry, methods)
     scenario = f"log:{log_name}"
@@ -328,6 +331,7 @@ def evaluate(cls, calibration: SensorLog, evaluation: SensorLog, truth: Truth, p
     result = job_fns.run_row(getattr(cls, "name", "method"), params, calibration, evaluation, _One())
     fields = result["info"]
     if fields["status"] == "ok":
-        fields.update(score(result["estimate"], truth))
+        fields.update(job_fns.score_or_invalid(result["estimate"], truth))
+    if fields["status"] == "ok":
         fields.update(tick_stats(result["ticks"], len(evaluation)))
     return fields

@@ -18,7 +18,7 @@ from pathlib import Path
 from rippleb import jobs as job_fns
 from rippleb.cache import Artefact, TamperedError, digest, load_log, log_bytes, store, unpack
 from rippleb.data import SensorLog
-from rippleb.metrics import score, tick_stats
+from rippleb.metrics import tick_stats
 from rippleb.pool import Pool
 from rippleb.registry import Registry, one_line
 from rippleb.results import ENVIRONMENT, STATUSES, ResultsFile, RunWarning, system_info
@@ -71,6 +71,7 @@ class State:
     lengths: dict = field(default_factory=dict)     # Case -> (n_samples, n_ticks)
     open_rows: dict = field(default_factory=dict)   # scored Case -> rows not yet recorded
     logs: dict = field(default_factory=dict)        # scored Case -> its visible log, verified (rows open)
+    invalid: dict = field(default_factory=dict)     # Case -> why its simulated log is not physical
 
 
 def say_retried(dropped: list[dict], out_dir) -> None:
@@ -143,6 +144,10 @@ def _start_next(pool: Pool, state: State, bar) -> bool:
             return True
         if not all(c in state.artefacts for c in (case, cal_case)):
             continue
+        unphysical = _unphysical(state, case, cal_case)
+        if unphysical:  # no method is fit or scored on a joint that does not exist
+            _record(state, key, bar, status="invalid", message=unphysical)
+            return True
         fit = Fit(key.method, cal_case)
         if state.fits[fit] == "pending":
             state.fits[fit] = "running"
@@ -192,12 +197,23 @@ def _finish_sim(fin, state: State) -> None:
     for role, ref in info["artefacts"].items():
         case = Case(*fin.key, role)
         state.artefacts[case] = Artefact(ref["path"], ref["sha256"])
+        if info.get("invalid"):
+            state.invalid[case] = str(info["invalid"])
         if role == SCORED:
             truth = job_fns.truth_from_message(arrays, info)
             state.truths[case] = truth
             n_samples = len(truth.eval_mask)
             state.lengths[case] = (n_samples, -(-n_samples // int(info["block_size"])))
     state.sims[fin.key] = "done"
+
+
+def _unphysical(state: State, case: Case, cal_case: Case) -> str | None:
+    """Why a row's scored or calibration log is not a joint that exists (checked once per
+    simulation, :func:`rippleb.simulator.validity.check_simulation`), or None."""
+    for c, what in ((case, "scored"), (cal_case, "calibration")):
+        if c in state.invalid:
+            return f"the simulated {what} log is not physical: {state.invalid[c]}"
+    return None
 
 
 def _fit_job(fit: Fit, state: State) -> job_fns.Job:
@@ -273,8 +289,9 @@ def _score_row(value: bytes, state: State, case: Case) -> dict:
         return {**fields, "status": "invalid", "message": checked}
     estimate, ticks = checked
     fields["n_samples"] = n_samples
-    fields.update(score(estimate, truth))
-    fields.update(tick_stats(ticks, n_samples))
+    fields.update(job_fns.score_or_invalid(estimate, truth))
+    if fields["status"] == "ok":
+        fields.update(tick_stats(ticks, n_samples))
     return fields
 
 

@@ -171,19 +171,25 @@ def _column(kind: str, n: int, rng: np.random.Generator):
         values = rng.normal(size=n)
         values[rng.integers(0, n)] = rng.choice([np.nan, np.inf, -np.inf])
         return values
+    if kind == "bool":
+        return rng.normal(size=n) > 0
+    if kind == "scaled":  # overflows the scores, or underflows to subnormal values
+        return rng.normal(size=n) * rng.choice([1e306, 1e-310])
     return np.array(["x" + str(i) for i in range(n)], dtype=object)
 
 
 _GOOD_COLUMNS = {"strain": "float", "encoder": "float", "current": "float", "torque_ref": "float"}
 _log = st.fixed_dictionaries({
-    "n": st.integers(0, 120),
+    # mostly shorter than the 0.2 s a log needs to be scored, sometimes long enough
+    "n": st.one_of(st.integers(0, 120), st.just(4000)),
     "seed": st.integers(0, 2**16),
     "t": _mostly(st.just("grid"), st.sampled_from(["repeat", "back", "gap", "random", "text", "missing"])),
     "fs": st.sampled_from([20_000.0, 1_000.0, 3.0]),
     # start from a good log; spoil, drop or add up to two columns
     "changes": st.dictionaries(st.sampled_from(["strain", "encoder", "current", "torque_ref", "torque_true",
                                                 "extra"]),
-                               st.sampled_from(["float", "int", "nan", "text", "drop"]), max_size=2),
+                               st.sampled_from(["float", "int", "nan", "text", "drop", "bool", "scaled"]),
+                               max_size=2),
     "suffix": st.sampled_from([".csv", ".parquet"]),
 })
 

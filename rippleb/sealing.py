@@ -80,6 +80,11 @@ class Seal:
         self._salt[:] = bytes(len(self._salt))
 
 
+def draw_salt() -> bytes:
+    """A new salt from the operating system's secure random source."""
+    return secrets.token_bytes(SALT_BYTES)
+
+
 def commitment(salt: bytes) -> str:
     """``sha256:`` + the SHA-256 of the salt bytes: what ``run.json`` records."""
     return "sha256:" + hashlib.sha256(bytes(salt)).hexdigest()
@@ -104,12 +109,12 @@ def check_new_salt_path(path, out) -> Path:
     if path.exists():
         raise InputError(f"{path}: --sealed writes a new salt file and never overwrites one; "
                          f"choose another file")
-    parent = path.resolve().parent
-    if not parent.is_dir() or not os.access(parent, os.W_OK):
-        raise InputError(f"{path}: --sealed cannot write the salt there ({parent} is not a writable directory)")
     if out is not None and Path(out).resolve() in path.resolve().parents:
         raise InputError(f"{path}: the salt file must be outside the run directory {out} (methods "
                          f"could read it there)")
+    parent = path.resolve().parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK):
+        raise InputError(f"{path}: --sealed cannot write the salt there ({parent} is not a writable directory)")
     return path
 
 
@@ -130,7 +135,7 @@ def open_seal(out, resume: bool, config: dict, *, sealed, salt_file) -> Seal | N
         if out is None:
             raise InputError("a sealed run needs an output directory (its run.json records the "
                              "salt's commitment)")
-        seal = Seal(secrets.token_bytes(SALT_BYTES), save_to=Path(sealed))
+        seal = Seal(draw_salt(), save_to=Path(sealed))
     else:
         if sealed is not None:
             raise InputError("--sealed starts a new sealed run; to resume one, give its salt with "
@@ -245,3 +250,27 @@ def redact(argv: list[str]) -> list[str]:
             continue
         out.append(word)
     return out
+
+
+# ----------------------------------------------------------------------------- the report
+
+
+def sealed_text(frame, run: dict) -> str:
+    """The report's sentence on whether its rows were sealed (``run`` is what
+    ``run.json`` and ``provenance.json`` recorded)."""
+    n = len(frame)
+    flags = (frame[SEALED_COLUMN].astype(str).str.lower() == "true") if SEALED_COLUMN in frame else None
+    sealed = 0 if flags is None else int(flags.sum())
+    if sealed == 0:
+        return ("Not sealed: these devices are those of the public seeds, which a method could "
+                "re-simulate to read off the truth; a comparison that matters runs sealed "
+                "(`rippleb run --sealed FILE`, docs/robustness.md).")
+    commitment_text = ((run.get("sealed") or {}).get("commitment") if isinstance(run.get("sealed"), dict)
+                       else None) or "not recorded"
+    if sealed < n:
+        return (f"Partly sealed: {sealed} of {n} rows ran on devices drawn from a secret salt, the "
+                f"others on the public seeds' devices (rows of different runs mixed?); only the "
+                f"sealed rows are safe from a method that re-simulates its scenario.")
+    return (f"Sealed: all {n} rows ran on devices drawn from a secret salt (commitment "
+            f"`{commitment_text}` in run.json), so no method could re-simulate them; the signal "
+            f"figures, re-simulated by the report, show the public seeds' devices instead.")

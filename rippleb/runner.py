@@ -281,12 +281,13 @@ def _run_rows(registry, plan: Plan, out_dir, *, jobs, timeout, memory_mb, resume
     results = ResultsFile(out_dir / "results.csv" if out_dir else None, resume=resume)
     if resume:
         say_retried(results.drop_environmental(), out_dir)
-        say_other_versions(results.rows, out_dir)
     done = results.done_keys()
     # Case-major order: the rows of one simulated log run together, so its truth is
     # released soon and memory stays bounded by the cases in flight, not the whole run.
     rows = sorted((k for k in plan.rows if row_key(k.fields()) not in done),
                   key=lambda k: (k.seed, k.scenario, k.extra, k.condition, k.method))
+    if resume and rows:
+        say_other_versions(results.rows, out_dir)
     try:
         with tempfile.TemporaryDirectory(prefix="rippleb-cache-") as cache:
             state = State(plan, registry, results, Path(cache), log_dir(out_dir), timeout,

@@ -317,6 +317,10 @@ def test_a_sealed_run_records_its_commitment_and_resumes_only_with_its_salt(tmp_
     assert main(["run", "--resume", "run", "--salt-file", "-", "--no-progress"]) == 0
     rows = pd.read_csv(tmp_path / "run" / "results.csv")
     assert rows.rms_error_nm.iloc[0] == first and list(rows.sealed) == [True]   # the same device again
+    assert main(["report", "run", "--no-figures"]) == 0
+    readme = (tmp_path / "run" / "report" / "README.md").read_text()
+    assert f"Sealed: all 1 rows ran on devices drawn from a secret salt (commitment `{config['sealed']['commitment']}`" \
+        in readme
 
 
 def test_sealed_options_that_cannot_apply_are_refused(tmp_path, monkeypatch, capsys):

@@ -60,7 +60,11 @@ def _what_was_kept(out_dir: Path | None, command: str = "run") -> str:
         done = 0
     kept = (f"{done} finished row(s) are in {results}" if done
             else f"no row had finished; the selection is in {out_dir / 'run.json'}")
-    return f"; {kept}; finish the run with: rippleb {command} --resume {out_dir}"
+    try:  # a sealed run is resumed with its salt
+        salt = " --salt-file FILE" if '"sealed"' in (out_dir / "run.json").read_text(errors="replace") else ""
+    except OSError:
+        salt = ""
+    return f"; {kept}; finish the run with: rippleb {command} --resume {out_dir}{salt}"
 
 
 @contextlib.contextmanager

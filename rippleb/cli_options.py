@@ -31,9 +31,9 @@ def check_run_options(args) -> None:
         for flag, value in (("--out", args.out), ("--calibration", args.calibration),
                             ("--sealed", getattr(args, "sealed", None))):
             if value is not None:
-                raise InputError(f"{flag} does not apply with --resume {args.resume} (the run "
-                                 f"directory and its selection are those of {args.resume}/run.json"
-                                 f"{'; a sealed run is resumed with --salt-file FILE' if flag == '--sealed' else ''})")
+                hint = "; a sealed run is resumed with --salt-file FILE" if flag == "--sealed" else ""
+                raise InputError(f"{flag} does not apply with --resume {args.resume} (the run directory "
+                                 f"and its selection are those of {args.resume}/run.json{hint})")
     elif getattr(args, "salt_file", None) is not None:
         raise InputError("--salt-file applies only with --resume DIR of a sealed run (a new sealed run "
                          "draws its own salt: --sealed FILE)")

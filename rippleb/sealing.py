@@ -46,7 +46,7 @@ SALT_BYTES = 32
 #: The result column that marks the rows of a sealed run (absent from unsealed runs).
 SEALED_COLUMN = "sealed"
 _DOMAIN = b"rippleb sealed device seed v1:"
-_PR_SET_DUMPABLE = 4
+_PR_GET_DUMPABLE, _PR_SET_DUMPABLE = 3, 4
 _COMMITMENT = re.compile(r"sha256:[0-9a-f]{64}")
 
 
@@ -65,6 +65,7 @@ class Seal:
         self._salt = bytearray(salt)   # a bytearray can be wiped when the run ends
         self.save_to = save_to
         self.commitment = commitment(salt)
+        self.was_dumpable: bool | None = None   # set by protect()
 
     def device_seed(self, seed: int) -> int:
         """The seed a sealed run simulates for the public ``seed``: 256 bits of
@@ -194,6 +195,7 @@ def protect(seal: Seal | None) -> None:
     without CAP_SYS_PTRACE may read its memory (the salt, the truths) through /proc or
     ptrace. Nothing changes for an unsealed run."""
     if seal is not None:
+        seal.was_dumpable = _dumpable()
         _set_dumpable(False)
 
 
@@ -206,7 +208,14 @@ def release(seal: Seal | None, run_started: bool) -> None:
         save_salt(seal, run_started)
     finally:
         seal.wipe()
-        _set_dumpable(True)
+        if getattr(seal, "was_dumpable", None) is not None:
+            _set_dumpable(seal.was_dumpable)
+
+
+def _dumpable() -> bool | None:
+    with contextlib.suppress(OSError, AttributeError, TypeError):
+        return bool(ctypes.CDLL(None, use_errno=True).prctl(_PR_GET_DUMPABLE, 0, 0, 0, 0))
+    return None
 
 
 def _set_dumpable(on: bool) -> None:
@@ -220,11 +229,16 @@ def save_salt(seal: Seal | None, run_started: bool) -> None:
     new (never overwritten), readable by its owner only."""
     if seal is None or seal.save_to is None or not run_started:
         return
+    created = False
     try:
         fd = os.open(seal.save_to, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        created = True
         with os.fdopen(fd, "w", encoding="ascii") as fh:
             fh.write(seal.hex() + "\n")
     except OSError as exc:
+        if created:  # a file cut short (a full disk) would be taken for a wrong salt later
+            with contextlib.suppress(OSError):
+                os.unlink(seal.save_to)
         # Nothing else holds the salt: say it rather than lose every sealed row's proof.
         print(f"rippleb: error: {seal.save_to}: cannot write the salt ({exc.strerror or exc}); "
               f"it is {seal.hex()}: save it now", file=sys.stderr)

@@ -69,15 +69,22 @@ RESIMULATOR = textwrap.dedent('''
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory):
+    from test_integrity import NAPPER
+
     site = tmp_path_factory.mktemp("resimulator-site")
     _dist(site, "rippleb-resimulator", "rippleb_resimulator", RESIMULATOR, {"resimulator": "Resimulator"})
+    _dist(site, "rippleb-napper", "rippleb_napper", NAPPER, {"napper": "Napper"})
     return site
 
 
+def _env(site, tmp_path):
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]),
+            "HOSTILE_PIDS": str(tmp_path / "pids")}
+
+
 def _cli(site, cwd, *args, stdin=None):
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")])}
     return subprocess.run([sys.executable, "-m", "rippleb", *map(str, args)], capture_output=True, text=True,
-                          env=env, cwd=cwd, timeout=600, stdin=stdin)
+                          env=_env(site, cwd), cwd=cwd, timeout=600, stdin=stdin)
 
 
 RUN = ["run", "--methods", "resimulator,raw", "--scenarios", "static-contact", "--seeds", "1",
@@ -111,6 +118,36 @@ def test_a_method_that_resimulates_wins_unsealed_and_loses_sealed(site, tmp_path
     # raw ran on the sealed device too: another device than the unsealed run's
     plain_raw = pd.read_csv(tmp_path / "plain" / "results.csv").set_index("method").loc["raw", "rms_error_nm"]
     assert rows.loc["raw", "rms_error_nm"] != plain_raw
+
+
+@pytest.mark.slow
+def test_an_interrupted_sealed_run_keeps_its_salt_and_resumes_with_it(site, tmp_path):
+    """SIGTERM while a fit sleeps: the salt is written once the jobs have ended, and
+    ``--resume`` with it finishes the run on the same devices."""
+    import signal
+    import time
+
+    args = [sys.executable, "-m", "rippleb", "run", "--methods", "napper,raw", "--scenarios", "static-contact",
+            "--seeds", "1", "--jobs", "1", "--no-progress", "--out", "run", "--sealed", "salt"]
+    runner = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                              env=_env(site, tmp_path), cwd=tmp_path)
+    while not (tmp_path / "pids.napped").is_file():    # the napper's fit is running
+        assert runner.poll() is None
+        assert not (tmp_path / "salt").exists()         # no file holds the salt while methods run
+        time.sleep(0.02)
+    runner.send_signal(signal.SIGTERM)
+    _, err = runner.communicate(timeout=60)
+    assert runner.returncode == 130, err
+    assert "the salt is in salt" in err and "rippleb run --resume run --salt-file FILE" in err
+    resumed = _cli(site, tmp_path, "run", "--resume", "run", "--salt-file", "salt", "--no-progress")
+    assert resumed.returncode == 0, resumed.stderr
+    rows = pd.read_csv(tmp_path / "run" / "results.csv").set_index("method")
+    assert list(rows.index) == ["napper", "raw"] and (rows.status == "ok").all() and rows.sealed.all()
+    device = rippleb.simulate("static-contact", sealing.Seal(bytes.fromhex((tmp_path / "salt").read_text()))
+                              .device_seed(0))
+    mask = device.eval_mask   # the napper returns zeros: its error is the sealed device's torque
+    assert rows.loc["napper", "rms_error_nm"] == pytest.approx(
+        float(np.sqrt(np.mean(device.log.torque_true[mask] ** 2))), rel=1e-12)
 
 
 # ----------------------------------------------------------------------------- the salt stays out
@@ -272,6 +309,22 @@ def test_the_seeker_finds_what_a_naive_design_would_leak(tmp_path, monkeypatch, 
             assert {str(s) for s in device_seeds} <= set(found["ints"])
         else:
             assert salt.hex() in found["windows"]
+
+
+@pytest.mark.slow
+def test_the_runner_is_not_dumpable_while_it_holds_a_salt(tmp_path):
+    """Where the kernel refuses PID namespaces, a row of the same user could otherwise read
+    the runner's memory through /proc/<runner>/mem (docs/robustness.md measured it)."""
+    import ctypes
+
+    get_dumpable = 3   # PR_GET_DUMPABLE
+    libc = ctypes.CDLL(None)
+    seen = []
+    frame = rippleb.run(methods="raw", scenarios="static-contact", seeds=1, out=tmp_path / "run",
+                        sealed=tmp_path / "salt", on_start=lambda: seen.append(libc.prctl(get_dumpable, 0, 0, 0, 0)))
+    assert list(frame.status) == ["ok"]
+    assert seen == [0]                                          # while the run held the salt
+    assert libc.prctl(get_dumpable, 0, 0, 0, 0) == 1            # and as before once it ended
 
 
 # ----------------------------------------------------------------------------- the run directory

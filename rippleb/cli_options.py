@@ -16,10 +16,11 @@ def add_seal_options(p) -> None:
     """``--sealed FILE`` (a new sealed run) and ``--salt-file FILE`` (its ``--resume``)."""
     p.add_argument("--sealed", type=Path, metavar="FILE",
                    help="a sealed run, for comparisons that matter: devices and noise are drawn from "
-                        "a secret random salt that no method can know, so a method that re-simulates "
-                        "its scenario gains nothing; run.json records the salt's SHA-256 commitment, "
-                        "and the salt is written to FILE (new, outside --out) when the run ends. Keep "
-                        "FILE apart and publish it to let others verify (docs/robustness.md)")
+                        "a secret random salt that no method can know, so no method can re-simulate "
+                        "the device it is scored on (the scenarios stay public: docs/robustness.md); "
+                        "run.json records the salt's SHA-256 commitment, and the salt is written to "
+                        "FILE (new, outside --out) when the run ends. Keep FILE apart, publish it "
+                        "to let others verify")
     p.add_argument("--salt-file", type=Path, metavar="FILE",
                    help="with --resume of a sealed run: the salt file --sealed wrote ('-': read it "
                         "from standard input)")

@@ -3,11 +3,12 @@
 Why: the simulator and the seeds are public, so a method could find out which scenario,
 condition and seed it is scored on (the log's ``meta`` says so, and a brute force over a
 few seeds finds it otherwise), call :func:`rippleb.simulate` itself and return the truth
-(an RMS error of 0.000). That cannot be forbidden; a sealed run makes it useless. The
-runner draws a random salt (:mod:`secrets`) and simulates each seed ``s`` on the device
-seed ``HMAC-SHA256(salt, s)`` instead of ``s``: the device, the nominal arm model, the
-index pulse and the noise are all drawn from it, so a method that re-simulates ``s``
-gets another device.
+(an RMS error of 0.000). That cannot be forbidden; a sealed run takes the exact truth
+out of reach. The runner draws a random salt (:mod:`secrets`) and simulates each seed
+``s`` on the device seed ``HMAC-SHA256(salt, s)`` instead of ``s``: the device, the
+nominal arm model, the index pulse and the noise are all drawn from it, so a method that
+re-simulates ``s`` gets another device, and is scored as that wrong device. (The public
+scenarios still tell it much of the torque: docs/robustness.md measures how much.)
 
 Where the salt lives (docs/robustness.md, "Sealed runs"):
 

@@ -18,6 +18,7 @@ import time
 import warnings
 from pathlib import Path
 
+from rippleb.cli_options import add_seal_options, check_run_options
 from rippleb.cli_sweep import add_executor_options, add_sweep, executor
 from rippleb.errors import InputError, RipplebError
 
@@ -59,7 +60,11 @@ def _what_was_kept(out_dir: Path | None, command: str = "run") -> str:
         done = 0
     kept = (f"{done} finished row(s) are in {results}" if done
             else f"no row had finished; the selection is in {out_dir / 'run.json'}")
-    return f"; {kept}; finish the run with: rippleb {command} --resume {out_dir}"
+    try:  # a sealed run is resumed with its salt
+        salt = " --salt-file FILE" if '"sealed"' in (out_dir / "run.json").read_text(errors="replace") else ""
+    except OSError:
+        salt = ""
+    return f"; {kept}; finish the run with: rippleb {command} --resume {out_dir}{salt}"
 
 
 @contextlib.contextmanager
@@ -142,6 +147,7 @@ def _add_run(sub) -> None:
                         "methods worse or not at all")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_executor_options(p)
+    add_seal_options(p)
     p.set_defaults(func=cmd_run)
 
 
@@ -299,9 +305,10 @@ def recorded(args, body) -> int:
     """Run ``body(args, start)`` (a run or a sweep) and record its provenance, with whether
     it completed, in the run directory however it ends."""
     from rippleb.provenance import collect_provenance
+    from rippleb.sealing import redact
 
     start = time.perf_counter()
-    provenance = collect_provenance(args.argv)
+    provenance = collect_provenance(redact(args.argv))  # no pointer to a salt file in the run directory
     completed = False
     try:
         status = body(args, start)
@@ -347,6 +354,7 @@ def _record_run(args, provenance: dict, wall_s: float) -> None:
 def _run(args, start: float) -> int:
     from rippleb import runner
 
+    check_run_options(args)
     timeout = _limit("--timeout", args.timeout)
     memory = _limit("--memory-limit", args.memory_limit)
     for flag, value in (("--methods", args.methods), ("--scenarios", args.scenarios),
@@ -380,7 +388,7 @@ def _run(args, start: float) -> int:
                            seeds, conditions=args.conditions or config.get("conditions"),
                            seed_start=args.seed_start or 0, jobs=args.jobs, out=args.resume,
                            timeout=timeout, memory_mb=memory, resume=True, progress=progress,
-                           on_start=started, executor=executor(args))
+                           on_start=started, executor=executor(args), salt_file=args.salt_file)
     else:
         if args.calibration is not None:
             raise InputError("--calibration only applies with --log")
@@ -389,7 +397,7 @@ def _run(args, start: float) -> int:
                            runner.DEFAULT_SEEDS if args.seeds is None else args.seeds,
                            conditions=args.conditions, seed_start=args.seed_start or 0, jobs=args.jobs,
                            out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress,
-                           on_start=started, executor=executor(args))
+                           on_start=started, executor=executor(args), sealed=args.sealed)
     from rippleb.tables import summary_text
 
     print(summary_text(frame))

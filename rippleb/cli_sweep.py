@@ -12,6 +12,7 @@ import os
 import time
 from pathlib import Path
 
+from rippleb.cli_options import check_sweep_options
 from rippleb.errors import InputError
 
 
@@ -85,6 +86,7 @@ def _sweep(args, start: float) -> int:
     from rippleb.cli import _limit, _report_broken_plugins
     from rippleb.sweep import run_sweep, specs_from_config
 
+    check_sweep_options(args)
     options = dict(jobs=args.jobs, timeout=_limit("--timeout", args.timeout),
                    memory_mb=_limit("--memory-limit", args.memory_limit),
                    progress=False if args.no_progress else None, executor=executor(args),

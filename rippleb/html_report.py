@@ -12,6 +12,7 @@ itself (``#page-errors``), so a reader, and the browser test, see a broken figur
 from __future__ import annotations
 
 import html
+import re
 from pathlib import Path
 
 import numpy as np
@@ -142,7 +143,10 @@ def _metrics_table(rows) -> str:
 
 def _markdown_table(text: str) -> str:
     """A GitHub Markdown table (as :mod:`rippleb.tables` writes) as a sortable HTML table."""
-    lines = [line.strip().strip("|").split("|") for line in text.splitlines() if line.startswith("|")]
+    # split on the bars that are not escaped: rippleb.tables.markdown writes a bar in a cell
+    # as a backslash and a bar
+    lines = [[c.replace("\\|", "|") for c in re.split(r"(?<!\\)\|", line.strip()[1:-1])]
+             for line in text.splitlines() if line.startswith("|")]
     if len(lines) < 2:
         return f"<p>{html.escape(text)}</p>"
     head = "".join(f"<th>{html.escape(c.strip())}</th>" for c in lines[0])

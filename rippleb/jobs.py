@@ -17,6 +17,7 @@ passes one.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import pickle
 import time
@@ -67,9 +68,11 @@ def visible_log(log: SensorLog, role: str) -> SensorLog:
     return log.for_method(keep_ref=(role == FITTING))
 
 
-def simulate_case(scenario, seed: int, condition: str, paths: dict) -> bytes:
+def simulate_case(scenario, seed: int, condition: str, paths: dict, device_seed: int | None = None) -> bytes:
     """Simulate once; store the visible log of each role in ``paths`` (role -> path).
 
+    ``device_seed`` (a sealed run, :mod:`rippleb.sealing`) is simulated instead of
+    ``seed``; the visible logs still name the public ``seed``, never the secret one.
     Returns :func:`rippleb.cache.pack` bytes: the truth arrays and, in ``info``, the
     ``fs``, each role's artefact (path and hash) and ``invalid``: why the log is not a
     joint that exists (:func:`rippleb.simulator.validity.check_simulation`), or ''.
@@ -77,9 +80,10 @@ def simulate_case(scenario, seed: int, condition: str, paths: dict) -> bytes:
     from rippleb.simulator import simulate
     from rippleb.simulator.validity import check_simulation
 
-    sim = simulate(scenario, seed, condition=condition)
+    sim = simulate(scenario, seed if device_seed is None else device_seed, condition=condition)
     truth = Truth.from_simulation(sim)
-    artefacts = {role: _store_log(path, visible_log(sim.log, role)) for role, path in paths.items()}
+    log = sim.log if device_seed is None else dataclasses.replace(sim.log, meta={**sim.log.meta, "seed": seed})
+    artefacts = {role: _store_log(path, visible_log(log, role)) for role, path in paths.items()}
     return truth_message(truth, artefacts, sim.log.spec.block_size, check_simulation(sim) or "")
 
 

@@ -166,9 +166,13 @@ def read_run_provenance(run_dir: Path) -> dict:
         path = Path(run_dir) / name
         if path.is_file():
             try:
-                out.update(json.loads(path.read_text()))
+                value = json.loads(path.read_text())
             except (OSError, ValueError) as exc:
                 raise InputError(f"{path}: cannot read: {exc}") from None
+            if not isinstance(value, dict):
+                raise InputError(f"{path}: not a rippleb run file (a JSON {type(value).__name__}, "
+                                 f"expected an object)")
+            out.update(value)
     return out
 
 
@@ -184,6 +188,7 @@ def provenance_markdown(prov: dict) -> str:
             ["jobs (rows run in parallel)", str(run.get("jobs", "not recorded"))],
             ["CPUs of the run's machine", str(run.get("cpu_count", "not recorded"))],
             ["seeds", prov["seeds_text"]],
+            ["sealed", _sealed_cell(run)],
             ["rippleb", str(run.get("rippleb_version", prov.get("rows_rippleb_version", "not recorded")))],
             ["git commit of the run", git_text(run)],
             ["Python", str(run.get("python", prov.get("rows_python", "not recorded")))],
@@ -211,6 +216,13 @@ def environment_sentence(run: dict) -> str:
         how = (f"the host's own numeric paths ({machine.get('numerics')}): rows may differ in "
                "their last bits on another CPU")
     return f"Made with {names} on {how} (docs/reproducibility.md; all versions under Provenance)."
+
+
+def _sealed_cell(run: dict) -> str:
+    sealed = run.get("sealed")
+    if isinstance(sealed, dict) and sealed.get("commitment"):
+        return f"yes: devices drawn from a secret salt, commitment {_code(str(sealed['commitment']))}"
+    return "no: public seeds"
 
 
 def machine_rows(run: dict) -> list[list[str]]:

@@ -29,6 +29,7 @@ import importlib.metadata
 import importlib.util
 import inspect
 import pkgutil
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -177,6 +178,7 @@ def _builtin_entries() -> tuple[dict[str, Entry], dict[str, str]]:
             broken[module_name] = one_line(exc)
             continue
         for name, class_name, doc in found:
+            check_method_name(name, module_name)
             if name in entries:
                 raise PluginError(f"two methods are named {name!r}: "
                                   f"{entries[name].source} and {module_name}")
@@ -202,11 +204,30 @@ def _method_classes(path: str) -> list[tuple[str, str, str | None]]:
     return found
 
 
+#: A method name: letters, digits, '-' and '_', starting with a letter or '_' (a Python
+#: identifier that may hold dashes). Anything else could not be selected unambiguously
+#: (``--methods a,b`` splits on commas) or named safely in a file.
+NAME_PATTERN = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*")
+#: Names ``--methods`` gives a meaning of its own.
+RESERVED_NAMES = ("all",)
+
+
+def check_method_name(name: str, source: str) -> None:
+    """Refuse a method name that ``--methods`` could not select, naming the plugin."""
+    if name.lower() in RESERVED_NAMES:
+        raise PluginError(f"method {name!r} ({source}): {name!r} is reserved (--methods {name} means "
+                          f"every method); rename its entry point")
+    if not NAME_PATTERN.fullmatch(name):
+        raise PluginError(f"method {name!r} ({source}): a method name is letters, digits, '-' and '_', "
+                          f"starting with a letter; rename its entry point")
+
+
 def _plugin_entries(group: str) -> list[Entry]:
     found: dict[str, Entry] = {}
     for ep in importlib.metadata.entry_points(group=group):
         dist = getattr(ep.dist, "name", None) or "?"
         source = f"{dist}: {ep.value}"
+        check_method_name(ep.name, source)
         if ep.name in found and found[ep.name].source != source:
             raise PluginError(f"two methods are named {ep.name!r}: "
                               f"{found[ep.name].source} (plugin) and {source} (plugin)")

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +26,9 @@ from rippleb.files import atomic_path
 from rippleb.provenance import (collect_provenance, environment_sentence, environment_warnings, git_state,
                                 provenance_markdown,  # noqa: F401
                                 read_run_provenance, seeds_text)
-from rippleb.results import swept_columns
+from rippleb.metrics import METRIC_COLUMNS
+from rippleb.results import RunWarning, swept_columns
+from rippleb.sealing import sealed_text
 from rippleb.verdicts import method_verdicts
 from rippleb.stats import (CONFIDENCE, METHOD_ORDER, fmt_interval, interval_frame,  # noqa: F401
                            method_order, scenario_order, t_interval, with_condition)
@@ -50,12 +53,37 @@ def load_rows(run_dir):
     frame = results.frame()
     if frame.empty:
         raise InputError(f"{path}: no rows to report")
+    _warn_implausible(frame, path)
     return frame
 
 
 def frame_condition_count(frame) -> int:
     """How many deployment conditions the rows hold (a file without the column: one)."""
     return int(frame["condition"].nunique()) if "condition" in frame else 1
+
+
+#: Metrics that no row can hold below zero (``step_latency_ms`` can: an estimate may lead).
+NON_NEGATIVE = tuple(c for c in METRIC_COLUMNS if c != "step_latency_ms")
+
+
+def _warn_implausible(frame, path) -> None:
+    """One warning line naming the rows whose metrics no run writes: negative where the
+    metric cannot be (an RMS error), or infinite (n/a is empty, never inf). The rows are
+    kept and reported as they are: the file says so, the report must not hide it."""
+    bad = []
+    for column in METRIC_COLUMNS:
+        if column not in frame:
+            continue
+        values = frame[column].astype(float)
+        wrong = np.isinf(values) | ((values < 0) if column in NON_NEGATIVE else False)
+        for i in np.flatnonzero(np.asarray(wrong)):
+            row = frame.iloc[i]
+            bad.append(f"{row['method']}/{row['scenario']}/{row['condition']}/seed {row['seed']} "
+                       f"{column} = {values.iloc[i]:g}")
+    if bad:
+        warnings.warn(f"{path}: {len(bad)} metric value(s) that no rippleb run writes (negative or "
+                      f"infinite; edited or corrupted?), reported as they are: {'; '.join(bad[:3])}"
+                      f"{'; ...' if len(bad) > 3 else ''}", RunWarning, stacklevel=3)
 
 
 def tables_markdown(frame) -> str:
@@ -194,6 +222,8 @@ def readme_markdown(frame, prov: dict, figures: dict, *, published: bool = False
     recorded = is_recorded(frame)
     parts = title_lines(published, recorded, run_dir) + ["", counts_sentence(frame, recorded),
                                                          "", environment_sentence(prov.get("run", {}))]
+    if not recorded:
+        parts += ["", prov.get("sealed") or sealed_text(frame, prov.get("run", {}))]
     parts += ["", READING_RECORDED if recorded else READING_SIMULATED]
     parts += ["", tables_markdown(frame)]
     if "us_per_tick_p99" in frame:
@@ -243,6 +273,16 @@ def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, arg
     frame = load_rows(run_dir)
     out = Path(out) if out is not None else run_dir / "report"
     _mkdir(out)
+    try:
+        return _write_report(run_dir, out, frame, figures=figures, figure_seed=figure_seed, argv=argv,
+                             published=published, html=html, figure_format=figure_format,
+                             speed_seeds=speed_seeds)
+    except OSError as exc:  # a full disk or a quota while writing figures: one line, not a traceback
+        raise InputError(f"{exc.filename or out}: cannot write the report: {exc.strerror or exc}") from None
+
+
+def _write_report(run_dir: Path, out: Path, frame, *, figures, figure_seed, argv, published, html,
+                  figure_format, speed_seeds) -> dict:
     prov = {"run": read_run_provenance(run_dir), "report": collect_provenance(argv),
             "published": published, "seeds": sorted(int(s) for s in frame["seed"].unique()),
             "seeds_text": seeds_text(frame["seed"].unique()), "rows": len(frame),
@@ -251,7 +291,10 @@ def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, arg
         values = sorted(str(v) for v in frame[col].dropna().unique()) if col in frame else []
         prov[f"rows_{col}"] = ", ".join(values) or "not recorded"
     prov["run_dir"] = str(run_dir)
+    prov["sealed"] = sealed_text(frame, prov["run"])
     drawn, warnings, signals = {}, environment_warnings(frame, prov["run"]), {}
+    if prov["sealed"].startswith("Partly"):
+        warnings.append(prov["sealed"])
     if figures and swept_columns(frame.columns):
         # a sweep is read through error against each swept parameter; the signal figures
         # would show the built-in scenarios at values the sweep did not hold fixed

@@ -201,6 +201,24 @@ def _cell(value) -> str:
     return str(value)
 
 
+def say_other_versions(rows: list[dict], out_dir) -> None:
+    """One warning line when a resumed run's finished rows were made by another rippleb
+    version than the rows this process is about to add (both are kept; their numbers may
+    differ where the code changed)."""
+    from rippleb import __version__
+
+    counts: dict[str, int] = {}
+    for row in rows:
+        version = str(row.get("rippleb_version") or "not recorded")
+        if version != __version__:
+            counts[version] = counts.get(version, 0) + 1
+    if counts:
+        seen = ", ".join(f"{n} by {v}" for v, n in sorted(counts.items()))
+        warnings.warn(f"{out_dir}/results.csv: {sum(counts.values())} finished row(s) were made by "
+                      f"another rippleb version ({seen}); this is {__version__}, and its new rows are "
+                      f"added beside them", RunWarning, stacklevel=3)
+
+
 def read_rows(path: Path) -> list[dict]:
     """The checked rows of a results CSV (for ``--resume`` and ``report``).
 

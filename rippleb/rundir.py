@@ -68,7 +68,7 @@ def _check_resume(out: Path, config: dict) -> None:
     allowed, since it only adds rows: ``run.json`` is updated to describe them, and said."""
     saved = read_config(out)
     saved.setdefault("conditions", [DEFAULT_CONDITION])
-    differ = [name for name in ("methods", "scenarios", "conditions", "seeds", "log", "sweep")
+    differ = [name for name in ("methods", "scenarios", "conditions", "seeds", "log", "sweep", "sealed")
               if saved.get(name) != config.get(name)]
     if differ == ["methods"] and set(saved["methods"]) <= set(config["methods"]):
         added = [m for m in config["methods"] if m not in saved["methods"]]
@@ -85,7 +85,8 @@ def _check_resume(out: Path, config: dict) -> None:
 
 
 def read_config(out) -> dict:
-    """The selection saved by a run in ``out/run.json`` (for ``--resume``)."""
+    """The selection saved by a run in ``out/run.json`` (for ``--resume``), checked field
+    by field: a file edited by hand or cut short is one line naming the field."""
     path = Path(out) / "run.json"
     if not path.is_file():
         raise InputError(f"{Path(out)}: nothing to resume (no run.json: no run was started there)")
@@ -97,7 +98,37 @@ def read_config(out) -> dict:
         raise InputError(f"{path}: not a rippleb run file")
     if "log" in config:
         raise InputError(f"{path}: a run on a recorded log cannot be resumed; run it again")
+    _check_fields(config, path)
     return config
+
+
+def _check_fields(config: dict, path: Path) -> None:
+    from rippleb.runner import MAX_SEEDS
+    from rippleb.sealing import check_commitment
+
+    for name in ("methods", "scenarios", "conditions"):
+        value = config.get(name)
+        if value is None and name == "conditions":
+            continue   # runs made before conditions existed: same-session
+        if not (isinstance(value, list) and value and all(isinstance(v, str) and v.strip() for v in value)):
+            raise InputError(f"{path}: field {name!r}: expected a non-empty list of names, got "
+                             f"{_shown(value)}")
+    seeds = config.get("seeds")
+    if not (isinstance(seeds, list) and seeds and all(type(s) is int and s >= 0 for s in seeds)):
+        raise InputError(f"{path}: field 'seeds': expected a non-empty list of non-negative whole "
+                         f"numbers, got {_shown(seeds)}")
+    if len(seeds) > MAX_SEEDS:
+        raise InputError(f"{path}: field 'seeds': {len(seeds)} seeds, more than the {MAX_SEEDS} a run may have")
+    if "sweep" in config and not isinstance(config["sweep"], dict):
+        raise InputError(f"{path}: field 'sweep': expected an object of parameter: values, got "
+                         f"{_shown(config['sweep'])}")
+    if "sealed" in config:
+        check_commitment(config["sealed"], path)
+
+
+def _shown(value) -> str:
+    """A field's value in an error line: short, and 'nothing' where it is missing."""
+    return "nothing (the field is missing)" if value is None else json.dumps(value)[:60]
 
 
 def log_dir(out_dir: Path | None) -> Path | None:

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from rippleb import jobs as job_fns
-from rippleb import numerics
+from rippleb import numerics, sealing
 from rippleb.cache import digest, log_bytes
 from rippleb.checks import (check_calibration, check_options, check_recording, check_reference, check_scenario,
                             check_scored_length)
@@ -47,7 +47,7 @@ from rippleb.metrics import Truth, tick_stats
 from rippleb.pool import Pool
 from rippleb.registry import Registry
 from rippleb.executors import row_tasks
-from rippleb.results import ResultsFile, RunWarning, row_key
+from rippleb.results import ResultsFile, RunWarning, row_key, say_other_versions
 from rippleb.rows import (CALIBRATION, FITTING, SCORED, Case, RowKey, scenario_hash, select_conditions,
                           select_scenarios, split_names)
 from rippleb.rundir import log_dir, read_config, run_dir
@@ -55,9 +55,15 @@ from rippleb.scheduler import (Plan, State, prepare_cases, progress_bar, record,
                                sigterm_as_interrupt)
 
 __all__ = ["run", "run_log", "resolve_methods", "read_config", "check_scenario", "evaluate",
-           "default_out_dir", "DEFAULT_SEEDS", "DEFAULT_TIMEOUT_S", "DEFAULT_MEMORY_MB"]
+           "default_out_dir", "DEFAULT_SEEDS", "MAX_SEEDS", "DEFAULT_TIMEOUT_S", "DEFAULT_MEMORY_MB"]
 
 DEFAULT_SEEDS = 3
+#: The most seeds (devices) one run may have. 20 devices give the published intervals;
+#: 10 000 narrow a 95 % interval to about 2 % of the device-to-device spread, beyond
+#: anything a comparison needs, and already take weeks of CPU for the default selection
+#: (10 000 x 8 scenarios x 10 methods rows). A larger number is a typo (--seeds 100000
+#: for --seeds 10), which would otherwise plan millions of rows and list every seed in run.json.
+MAX_SEEDS = 10_000
 DEFAULT_TIMEOUT_S = 300.0
 DEFAULT_MEMORY_MB = 4096.0
 
@@ -65,7 +71,7 @@ DEFAULT_MEMORY_MB = 4096.0
 def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, seed_start: int = 0,
         jobs: int = 1, out=None, timeout: float | None = DEFAULT_TIMEOUT_S,
         memory_mb: float | None = DEFAULT_MEMORY_MB, resume: bool = False, progress: bool | None = False,
-        on_start=None, executor=None):
+        on_start=None, executor=None, sealed=None, salt_file=None):
     """Run methods on simulated scenarios; one row per method x scenario x condition x seed.
 
     Parameters
@@ -101,6 +107,13 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, s
     executor
         None for the local forked pool, or an object with ``run(tasks, record)`` that runs
         whole rows elsewhere (:class:`rippleb.dask_executor.DaskExecutor`).
+    sealed
+        A new sealed run (:mod:`rippleb.sealing`): the path of a new file, outside ``out``,
+        that the secret salt is written to when the run ends; the devices and the noise are
+        drawn from it, ``run.json`` records its commitment and each row gets
+        ``sealed = True``. Needs ``out``; not with an ``executor``.
+    salt_file
+        With ``resume`` of a sealed run: the file ``sealed`` wrote (``"-"``: standard input).
 
     Returns
     -------
@@ -128,13 +141,14 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, s
     return run_resolved(registry, names, [(s, calibration, {}) for s in scenario_objs], condition_list,
                         seed_list, config=config, jobs=jobs, out=out, timeout=timeout,
                         memory_mb=memory_mb, resume=resume, progress=progress, on_start=on_start,
-                        executor=executor)
+                        executor=executor, sealed=sealed, salt_file=salt_file)
 
 
 def run_resolved(registry: Registry, names: list[str], entries: list[tuple], conditions: list[str],
                  seeds: list[int], *, config: dict, jobs: int = 1, out=None,
                  timeout: float | None = DEFAULT_TIMEOUT_S, memory_mb: float | None = DEFAULT_MEMORY_MB,
-                 resume: bool = False, progress: bool | None = False, on_start=None, executor=None):
+                 resume: bool = False, progress: bool | None = False, on_start=None, executor=None,
+                 sealed=None, salt_file=None):
     """Run checked selections: ``entries`` holds ``(scenario, calibration scenario, extra key
     columns)`` triples of resolved :class:`~rippleb.scenario.Scenario` objects.
 
@@ -159,8 +173,14 @@ def run_resolved(registry: Registry, names: list[str], entries: list[tuple], con
                 for method in names:
                     key = RowKey(method, scenario.name, condition, seed, tuple(extra.items()))
                     plan.add_row(key, case, cal_case)
+    if sealed is not None:
+        sealing.check_new_salt_path(sealed, out)
+    if executor is not None and (sealed is not None or salt_file is not None):
+        raise InputError("--sealed/--salt-file run on the local pool only (the salt would have to "
+                         "reach the Dask workers); drop --executor dask/--scheduler")
     return _execute(registry, plan, out=out, jobs=jobs, timeout=timeout, memory_mb=memory_mb,
-                    resume=resume, progress=progress, config=config, on_start=on_start, executor=executor)
+                    resume=resume, progress=progress, config=config, on_start=on_start, executor=executor,
+                    sealed=sealed, salt_file=salt_file)
 
 
 def _warn_native_numerics() -> None:
@@ -247,39 +267,69 @@ def resolve_methods(registry: Registry, methods) -> list[str]:
 
 
 def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, progress, config,
-             on_start=None, executor=None):
+             on_start=None, executor=None, sealed=None, salt_file=None):
     # The local jobs are forked by a server forked now, before the first simulation, so
     # no job's memory ever holds a truth (rippleb.forkserver). Another executor runs its
     # rows elsewhere.
     server = (ForkServer.start(registry, preload=lambda: _warm(registry, plan)) if executor is None
               else contextlib.nullcontext())
-    with server, run_dir(out, resume, config) as out_dir:
-        if on_start is not None:
-            on_start()
-        results = ResultsFile(out_dir / "results.csv" if out_dir else None, resume=resume)
-        if resume:
-            say_retried(results.drop_environmental(), out_dir)
-        done = results.done_keys()
-        # Case-major order: the rows of one simulated log run together, so its truth is
-        # released soon and memory stays bounded by the cases in flight, not the whole run.
-        rows = sorted((k for k in plan.rows if row_key(k.fields()) not in done),
-                      key=lambda k: (k.seed, k.scenario, k.extra, k.condition, k.method))
-        try:
-            with tempfile.TemporaryDirectory(prefix="rippleb-cache-") as cache:
-                state = State(plan, registry, results, Path(cache), log_dir(out_dir), timeout,
-                               time.strftime("%Y%m%dT%H%M%S"), rows)
-                with progress_bar(len(rows), progress) as bar, sigterm_as_interrupt():
-                    prepare_cases(state)
-                    if executor is None:
-                        schedule(Pool(int(jobs), memory_mb, server=server), state, bar)
-                    else:  # whole rows run elsewhere; this process only records them
-                        executor.run(row_tasks(state, memory_mb),
-                                     lambda key, fields: record(state, key, bar, **fields))
-                        _warn_native_rows(results.rows)
-        finally:  # finished or interrupted: the file in key order, from the rows in memory
-            if results.rows:
-                results.flush()
+    seal, started = None, False
+    try:
+        with server:
+            # After the fork: the server, and every row it forks, never holds the salt.
+            seal = sealing.open_seal(out, resume, config, sealed=sealed, salt_file=salt_file)
+            sealing.protect(seal)
+            with run_dir(out, resume, config) as out_dir:
+                started = out_dir is not None
+                return _run_rows(registry, plan, out_dir, jobs=jobs, timeout=timeout, memory_mb=memory_mb,
+                                 resume=resume, progress=progress, on_start=on_start, executor=executor,
+                                 server=server, seal=seal)
+    finally:  # every job has ended (the server reaped them): only now may a salt file exist
+        sealing.release(seal, started)
+
+
+def _run_rows(registry, plan: Plan, out_dir, *, jobs, timeout, memory_mb, resume, progress, on_start,
+              executor, server, seal):
+    """Run the rows of ``plan`` missing from ``out_dir`` (the directory is checked and locked)."""
+    if on_start is not None:
+        on_start()
+    if seal is not None:
+        _warm_simulator(plan)  # sealed simulations are forked from here (rippleb.sealing)
+    results = ResultsFile(out_dir / "results.csv" if out_dir else None, resume=resume)
+    if resume:
+        say_retried(results.drop_environmental(), out_dir)
+    done = results.done_keys()
+    # Case-major order: the rows of one simulated log run together, so its truth is
+    # released soon and memory stays bounded by the cases in flight, not the whole run.
+    rows = sorted((k for k in plan.rows if row_key(k.fields()) not in done),
+                  key=lambda k: (k.seed, k.scenario, k.extra, k.condition, k.method))
+    if resume and rows:
+        say_other_versions(results.rows, out_dir)
+    try:
+        with tempfile.TemporaryDirectory(prefix="rippleb-cache-") as cache:
+            state = State(plan, registry, results, Path(cache), log_dir(out_dir), timeout,
+                           time.strftime("%Y%m%dT%H%M%S"), rows, seal=seal)
+            with progress_bar(len(rows), progress) as bar, sigterm_as_interrupt():
+                prepare_cases(state)
+                if executor is None:
+                    schedule(Pool(int(jobs), memory_mb, server=server), state, bar)
+                else:  # whole rows run elsewhere; this process only records them
+                    executor.run(row_tasks(state, memory_mb),
+                                 lambda key, fields: record(state, key, bar, **fields))
+                    _warn_native_rows(results.rows)
+    finally:  # finished or interrupted: the file in key order, from the rows in memory
+        if results.rows:
+            results.flush()
     return results.frame()
+
+
+def _warm_simulator(plan: Plan) -> None:
+    """Load the simulator and its arm models in this process, which forks a sealed run's
+    simulations (rippleb's code only: no method is imported here)."""
+    from rippleb.simulator import robot, simulation  # noqa: F401 - the joint's kernels with it
+
+    for scenario, _ in plan.sims.values():
+        robot.load_model(scenario.robot)
 
 
 def _warm(registry, plan: Plan) -> None:
@@ -302,6 +352,9 @@ def _seed_list(seeds, seed_start: int) -> list[int]:
     if isinstance(seeds, (int, np.integer)):
         if seeds < 1:
             raise InputError(f"--seeds must be at least 1, got {seeds}")
+        if seeds > MAX_SEEDS:
+            raise InputError(f"--seeds {seeds}: at most {MAX_SEEDS} devices per run (docs/design.md); "
+                             f"split a larger study into runs with --seed-start")
         if seed_start < 0:
             raise InputError(f"--seed-start must be a non-negative integer, got {seed_start}")
         return list(range(seed_start, seed_start + int(seeds)))
@@ -310,7 +363,10 @@ def _seed_list(seeds, seed_start: int) -> list[int]:
         raise InputError("no seeds given")
     if any(s < 0 for s in seeds):
         raise InputError(f"seeds must be non-negative integers, got {min(seeds)}")
-    return list(dict.fromkeys(seeds))
+    seeds = list(dict.fromkeys(seeds))
+    if len(seeds) > MAX_SEEDS:
+        raise InputError(f"{len(seeds)} seeds: at most {MAX_SEEDS} devices per run (docs/design.md)")
+    return seeds
 
 
 # ----------------------------------------------------------------------------- in-process helpers

@@ -8,6 +8,7 @@ what they send back is read as plain arrays and a whitelist of typed fields.
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import signal
 import sys
@@ -23,6 +24,7 @@ from rippleb.pool import Pool
 from rippleb.registry import Registry, one_line
 from rippleb.results import ENVIRONMENT, STATUSES, ResultsFile, RunWarning, system_info
 from rippleb.rows import SCORED, Case, RowKey
+from rippleb.sealing import SEALED_COLUMN
 
 
 @dataclass
@@ -72,6 +74,7 @@ class State:
     open_rows: dict = field(default_factory=dict)   # scored Case -> rows not yet recorded
     logs: dict = field(default_factory=dict)        # scored Case -> its visible log, verified (rows open)
     invalid: dict = field(default_factory=dict)     # Case -> why its simulated log is not physical
+    seal: object = None                              # a sealed run's rippleb.sealing.Seal, else None
 
 
 def say_retried(dropped: list[dict], out_dir) -> None:
@@ -174,7 +177,7 @@ def _start_next(pool: Pool, state: State, bar) -> bool:
             state.sims[sim] = "running"
             scenario, roles = state.plan.sims[sim]
             paths = {role: str(state.cache / Case(*sim, role).file_name()) for role in roles}
-            pool.submit(sim, _sim_job(scenario, sim, paths), None, None)
+            _submit_sim(pool, state, sim, _sim_job(scenario, sim, paths, state.seal))
             return True
     return False
 
@@ -185,8 +188,24 @@ def _output(state: State, stem: str) -> str | None:
     return str(state.log_dir / f"{safe_name(stem)}.txt") if state.log_dir else None
 
 
-def _sim_job(scenario, sim: tuple, paths: dict) -> job_fns.Job:
-    return job_fns.Job("simulate", (scenario, sim[3], sim[2], paths))
+def _sim_job(scenario, sim: tuple, paths: dict, seal=None) -> job_fns.Job:
+    if seal is None:
+        return job_fns.Job("simulate", (scenario, sim[3], sim[2], paths))
+    return job_fns.Job("simulate", (scenario, sim[3], sim[2], paths, seal.device_seed(sim[3])))
+
+
+def _submit_sim(pool: Pool, state: State, sim: tuple, job: job_fns.Job) -> None:
+    """Start a simulation. A sealed one is forked from this process, never sent to the
+    fork server: the server's memory, freed parts included, is inherited by every row it
+    forks later, and the job's arguments hold the secret device seed (rippleb.sealing)."""
+    if state.seal is None or pool.server is None:
+        pool.submit(sim, job, None, None)
+        return
+    server, pool.server = pool.server, None   # this one job only: the rows stay with the server
+    try:
+        pool.submit(sim, functools.partial(job, None), None, None)  # a simulation needs no registry
+    finally:
+        pool.server = server
 
 
 def _finish_sim(fin, state: State) -> None:
@@ -315,6 +334,8 @@ def _record(state: State, key: RowKey, bar, **fields) -> None:
     # An executor's fields may carry the system information of the machine that ran the row.
     row = {**system_info(), **key.fields(), **fields, "calibration": state.plan.calibration_label,
            "scenario_sha256": case.content, "run_id": state.run_id}
+    if state.seal is not None:  # the column exists only in sealed runs: unsealed rows stay as they were
+        row[SEALED_COLUMN] = True
     state.results.add(row)
     bar.update()
     # The truth of a case is kept only while rows of it are open.

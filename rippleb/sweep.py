@@ -134,6 +134,8 @@ def parse_params(specs: list[str]) -> list[Sweep]:
             raise InputError(f"--param {name}: given twice; list all its values in one --param")
         seen.add(name)
         parsed = [PARAMS[name].parse(v.strip()) for v in values.split(",") if v.strip()]
+        if not parsed:  # "joint.fs=,,": a grid of no points would run no row and say nothing
+            raise InputError(f"--param {spec!r}: no values; expected NAME=v1,v2,...")
         if len(set(parsed)) != len(parsed):
             raise InputError(f"--param {name}: a value is repeated")
         sweeps.append(Sweep(PARAMS[name], tuple(parsed)))

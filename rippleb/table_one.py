@@ -26,9 +26,9 @@ PAPER_CITATION = ("Jung, Kim, Koo, Choi and Moon, IEEE/ASME Trans. Mechatronics 
 
 
 def _markdown(rows, headers) -> str:
-    from tabulate import tabulate
+    from rippleb.tables import markdown
 
-    return tabulate(rows, headers=headers, tablefmt="github", disable_numparse=True)
+    return markdown(rows, headers)
 
 
 def _plural(n: int, word: str) -> str:

@@ -47,10 +47,17 @@ NOISY_TAIL = 20.0
 # --------------------------------------------------------------------------- helpers
 
 def markdown(rows, headers) -> str:
-    """A GitHub Markdown table; cells are printed as given."""
+    """A GitHub Markdown table; cells are printed as given, but for ``|``, escaped as ``\\|``
+    (a scenario file ``a|b.toml`` would otherwise split its cell in two)."""
     from tabulate import tabulate
 
-    return tabulate(rows, headers=headers, tablefmt="github", disable_numparse=True)
+    rows = [[escape_cell(c) for c in row] for row in rows]
+    return tabulate(rows, headers=[escape_cell(h) for h in headers], tablefmt="github", disable_numparse=True)
+
+
+def escape_cell(value):
+    """A table cell with every ``|`` escaped for Markdown (other values unchanged)."""
+    return value.replace("|", "\\|") if isinstance(value, str) else value
 
 
 def plural(n: int, word: str) -> str:

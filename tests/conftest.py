@@ -14,6 +14,7 @@ import rippleb  # noqa: F401
 ONE_WORKER_FILES = {
     "test_bad_input.py",      # `outcomes`: every bad-input case run once
     "test_bandwidth.py",      # the calibration log
+    "test_checked_input.py",  # `finished`: one run, reported and resumed by several tests
     "test_dask.py",           # clusters started one test at a time
     "test_faults.py",         # fitted methods and faulty simulations
     "test_kalman_ripple.py",  # fitted filters

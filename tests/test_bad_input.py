@@ -300,8 +300,9 @@ def test_scenario_and_log_readers_use_no_code_loaders():
 
 @pytest.mark.slow
 def test_names_cannot_make_the_runner_write_outside_out(tmp_path):
-    """A plugin named ``../../escape`` and a scenario file named ``..x.toml``: every file the
-    run writes stays under ``--out``."""
+    """A scenario file named ``..x.toml``: every file the run writes stays under ``--out``.
+    A plugin named ``../../escape`` is refused at discovery (issue 25: a method name is an
+    identifier with dashes), before anything is written."""
     site = tmp_path / "site"
     _dist(site, "rippleb-escape", "escape_mod", PLUGIN, {"../../escape": "Plugin"})
     work = tmp_path / "work"
@@ -309,9 +310,13 @@ def test_names_cannot_make_the_runner_write_outside_out(tmp_path):
     (work / "..x.toml").write_text(GOOD)
     before = set(tmp_path.rglob("*"))
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")])}
-    proc = subprocess.run([sys.executable, "-m", "rippleb", "run", "--methods", "../../escape,raw", "--scenarios",
-                           "..x.toml", "--seeds", "1", "--jobs", "1", "--no-progress", "--out", "deep/out"],
-                          cwd=work, env=env, capture_output=True, text=True, timeout=300)
+    command = [sys.executable, "-m", "rippleb", "run", "--methods", "../../escape,raw", "--scenarios",
+               "..x.toml", "--seeds", "1", "--jobs", "1", "--no-progress", "--out", "deep/out"]
+    proc = subprocess.run(command, cwd=work, env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2 and "method '../../escape' (rippleb-escape: escape_mod:Plugin)" in proc.stderr
+    assert set(tmp_path.rglob("*")) == before
+    command[command.index("../../escape,raw")] = "raw"
+    proc = subprocess.run(command, cwd=work, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     out = (work / "deep" / "out").resolve()
     created = [p for p in set(tmp_path.rglob("*")) - before if "__pycache__" not in p.parts]
@@ -319,5 +324,5 @@ def test_names_cannot_make_the_runner_write_outside_out(tmp_path):
                and p.resolve() not in out.parents]
     assert outside == [], outside
     rows = pd.read_csv(out / "results.csv")
-    assert set(rows.method) == {"../../escape", "raw"} and set(rows.scenario) == {"..x"}
+    assert set(rows.method) == {"raw"} and set(rows.scenario) == {"..x"}
     assert (rows.status == "ok").all(), rows[["method", "status", "message"]]

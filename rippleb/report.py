@@ -191,6 +191,13 @@ READING_SIMULATED = """## Reading these tables
   changed since calibration: a power cycle loses the absolute angle until the first index
   pulse, ageing drifts the map, re-assembly redraws it (`docs/physics.md`, "Deployment
   conditions").
+- `realistic` is the same joint as `same-session` with the physics no method models turned on
+  at their documented sizes, in the calibration session too: gauge dynamics that change the
+  ripple with speed, a ripple that saturates with load and changes with the loaded tooth
+  flank, gauge warm-up within the session, an anti-alias filter and PWM pickup before the
+  ADC, encoder edge errors, eccentricity and missed counts (`docs/physics.md`, "Beyond the
+  methods' models"). It is where a method that wins only because the simulator's ripple has
+  the form it assumes would be found out; `results/sweeps/` varies each effect alone.
 - `torque_ref` (Table I's reference) is the paper's eq. (7) on the desired trajectory with
   a nominal arm model whose masses and inertias differ from the simulated arm's by a few
   per cent, as an identification leaves them.

@@ -5,9 +5,17 @@ The public API is re-exported here; see the README for the CLI.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from rippleb import interrupts as _interrupts
 
-from rippleb._lazy import lazy_exports
+if _interrupts.is_the_program():
+    # The `rippleb` command: from its first line, Ctrl-C and SIGTERM are recorded, and
+    # raised where the command can report them in one line (rippleb.cli.entry), not as a
+    # traceback from the middle of an import. Importing rippleb as a library does not do this.
+    _interrupts.hold_from_start()
+
+from typing import TYPE_CHECKING  # noqa: E402
+
+from rippleb._lazy import lazy_exports  # noqa: E402
 
 #: Where each public name lives. They are imported on first use (PEP 562), so that
 #: ``import rippleb`` and ``python -m rippleb --help`` do not pay for numba, scipy and

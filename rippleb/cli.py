@@ -25,27 +25,62 @@ PLUGIN_IMPORT_TIMEOUT_S = 20.0
 EPILOG = "Run 'rippleb COMMAND --help' for the options of one command."
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``rippleb`` script; returns the exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    # The exact command line, recorded by `run` in DIR/provenance.json and by `report`.
-    args.argv = list(sys.argv[1:] if argv is None else argv)
+def entry() -> None:
+    """The ``rippleb`` program (its console script and ``python -m rippleb``): :func:`main`,
+    with SIGINT and SIGTERM handled from its first line until the process exits."""
+    from rippleb import interrupts
+
+    status = 130
     try:
-        with _warnings_as_lines():
-            return args.func(args) or 0
-    except RipplebError as exc:
-        if args.debug:
-            raise
-        print(f"rippleb: error: {exc}", file=sys.stderr)
-        return 2
-    except BrokenPipeError:
-        # the reader went away (`rippleb list | head`): stop quietly, like any Unix filter
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 141
-    except KeyboardInterrupt:
-        print(f"rippleb: interrupted{_what_was_kept(getattr(args, 'out_dir', None) if getattr(args, 'started', False) else None, getattr(args, 'command', 'run'))}", file=sys.stderr)
-        return 130
+        interrupts.install()
+        status = main()
+    except KeyboardInterrupt:  # only in the few instructions around main's own handling
+        print("rippleb: interrupted", file=sys.stderr)
+    finally:
+        # The command is over and its status decided: a late signal changes nothing (while
+        # Python shuts down it would kill the process or print a traceback).
+        interrupts.ignore_from_now()
+    sys.exit(status)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run one ``rippleb`` command line; returns the exit status.
+
+    SIGINT and SIGTERM at any moment (the imports of start-up included) end the command
+    with one line on stderr and status 130; an interrupted run says where its finished
+    rows are and how to finish it (docs/design.md, "Interrupts").
+    """
+    from rippleb import interrupts
+
+    args = None
+    with interrupts.handling():
+        try:
+            interrupts.check_interrupted()  # one that came while the program started
+            args = build_parser().parse_args(argv)
+            # The exact command line, recorded by `run` in DIR/provenance.json and by `report`.
+            args.argv = list(sys.argv[1:] if argv is None else argv)
+            with _warnings_as_lines():
+                return args.func(args) or 0
+        except RipplebError as exc:
+            if args is not None and args.debug:
+                raise
+            print(f"rippleb: error: {exc}", file=sys.stderr)
+            return 2
+        except BrokenPipeError:
+            # the reader went away (`rippleb list | head`): stop quietly, like any Unix filter
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return 141
+        except KeyboardInterrupt:
+            print(f"rippleb: interrupted{_interrupted(args)}", file=sys.stderr)
+            return 130
+
+
+def _interrupted(args) -> str:
+    """What an interrupted command left behind: for a run that had claimed its directory,
+    its finished rows and how to finish it."""
+    if args is None or not getattr(args, "started", False):
+        return ""
+    return _what_was_kept(getattr(args, "out_dir", None), getattr(args, "command", "run"))
 
 
 def _what_was_kept(out_dir: Path | None, command: str = "run") -> str:

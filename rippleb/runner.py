@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rippleb import interrupts
 from rippleb import jobs as job_fns
 from rippleb.cache import digest, log_bytes
 from rippleb.checks import check_calibration, check_options, check_recording, check_scenario
@@ -47,8 +48,7 @@ from rippleb.results import ResultsFile, row_key
 from rippleb.rows import (CALIBRATION, FITTING, SCORED, Case, RowKey, scenario_hash, select_conditions,
                           select_scenarios, split_names)
 from rippleb.rundir import log_dir, read_config, run_dir
-from rippleb.scheduler import (Plan, State, prepare_cases, progress_bar, record, say_retried, schedule,
-                               sigterm_as_interrupt)
+from rippleb.scheduler import Plan, State, prepare_cases, progress_bar, record, say_retried, schedule
 
 __all__ = ["run", "run_log", "resolve_methods", "read_config", "check_scenario", "evaluate",
            "default_out_dir", "DEFAULT_SEEDS", "DEFAULT_TIMEOUT_S", "DEFAULT_MEMORY_MB"]
@@ -217,37 +217,47 @@ def resolve_methods(registry: Registry, methods) -> list[str]:
 
 def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, progress, config,
              on_start=None, executor=None):
-    # The local jobs are forked by a server forked now, before the first simulation, so
-    # no job's memory ever holds a truth (rippleb.forkserver). Another executor runs its
-    # rows elsewhere.
-    server = (ForkServer.start(registry, preload=lambda: _warm(registry, plan)) if executor is None
-              else contextlib.nullcontext())
-    with server, run_dir(out, resume, config) as out_dir:
-        if on_start is not None:
-            on_start()
-        results = ResultsFile(out_dir / "results.csv" if out_dir else None, resume=resume)
-        if resume:
-            say_retried(results.drop_environmental(), out_dir)
-        done = results.done_keys()
-        # Case-major order: the rows of one simulated log run together, so its truth is
-        # released soon and memory stays bounded by the cases in flight, not the whole run.
-        rows = sorted((k for k in plan.rows if row_key(k.fields()) not in done),
-                      key=lambda k: (k.seed, k.scenario, k.extra, k.condition, k.method))
-        try:
-            with tempfile.TemporaryDirectory(prefix="rippleb-cache-") as cache:
-                state = State(plan, registry, results, Path(cache), log_dir(out_dir), timeout,
-                               time.strftime("%Y%m%dT%H%M%S"), rows)
-                with progress_bar(len(rows), progress) as bar, sigterm_as_interrupt():
-                    prepare_cases(state)
-                    if executor is None:
-                        schedule(Pool(int(jobs), memory_mb, server=server), state, bar)
-                    else:  # whole rows run elsewhere; this process only records them
-                        executor.run(row_tasks(state, memory_mb),
-                                     lambda key, fields: record(state, key, bar, **fields))
-        finally:  # finished or interrupted: the file in key order, from the rows in memory
-            if results.rows:
-                results.flush()
+    # Signals are held from here on and raised only where stopping leaves nothing half
+    # done (rippleb.interrupts): the loops between jobs and the waits, which poll. So an
+    # interrupt never orphans a job, a half-claimed run directory or a temporary file.
+    with interrupts.handling(), interrupts.held():
+        # The local jobs are forked by a server forked now, before the first simulation, so
+        # no job's memory ever holds a truth (rippleb.forkserver). Another executor runs its
+        # rows elsewhere.
+        server = (ForkServer.start(registry, preload=lambda: _warm(registry, plan)) if executor is None
+                  else contextlib.nullcontext())
+        with server, run_dir(out, resume, config, on_start) as out_dir:
+            interrupts.check_interrupted()
+            results = ResultsFile(out_dir / "results.csv" if out_dir else None, resume=resume)
+            try:
+                _run_rows(registry, plan, results, out_dir, resume=resume, jobs=jobs, timeout=timeout,
+                          memory_mb=memory_mb, progress=progress, server=server, executor=executor)
+            finally:  # finished or interrupted: the file in key order, from the rows in memory
+                if results.rows:
+                    results.flush()
     return results.frame()
+
+
+def _run_rows(registry, plan: Plan, results: ResultsFile, out_dir, *, resume, jobs, timeout, memory_mb,
+              progress, server, executor) -> None:
+    """Run the rows of ``plan`` not yet in ``results`` and record each as it ends."""
+    if resume:
+        say_retried(results.drop_environmental(), out_dir)
+    done = results.done_keys()
+    # Case-major order: the rows of one simulated log run together, so its truth is
+    # released soon and memory stays bounded by the cases in flight, not the whole run.
+    rows = sorted((k for k in plan.rows if row_key(k.fields()) not in done),
+                  key=lambda k: (k.seed, k.scenario, k.extra, k.condition, k.method))
+    with tempfile.TemporaryDirectory(prefix="rippleb-cache-") as cache:
+        state = State(plan, registry, results, Path(cache), log_dir(out_dir), timeout,
+                      time.strftime("%Y%m%dT%H%M%S"), rows)
+        with progress_bar(len(rows), progress) as bar:
+            prepare_cases(state)
+            interrupts.check_interrupted()
+            if executor is None:
+                schedule(Pool(int(jobs), memory_mb, server=server), state, bar)
+            else:  # whole rows run elsewhere; this process only records them
+                executor.run(row_tasks(state, memory_mb), lambda key, fields: record(state, key, bar, **fields))
 
 
 def _warm(registry, plan: Plan) -> None:

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import functools
 import os
 import random
 import shutil
@@ -67,12 +68,10 @@ def trial(delay: float, mode: str, *, python: str = sys.executable, run_args=RUN
     tmp, out, tag = work / "tmp", work / "out", uuid.uuid4().hex
     tmp.mkdir()
     env = {**os.environ, MARKER: tag, "TMPDIR": str(tmp)}
-    cmd = [python, "-m", "rippleb", "run", *run_args, "--out", str(out), "--no-progress"]
-    # Its own session, as a command in a terminal has; SIGINT not ignored (a child of a
-    # background process, e.g. a pytest-xdist worker, inherits it ignored).
+    cmd = [*_default_sigint(), python, "-m", "rippleb", "run", *run_args, "--out", str(out), "--no-progress"]
+    # Its own session, as a command in a terminal has.
     proc = subprocess.Popen(cmd, cwd=work, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                            text=True, start_new_session=True)
     result = {"delay": delay, "mode": mode, "problems": []}
     try:
         time.sleep(delay)
@@ -96,6 +95,17 @@ def trial(delay: float, mode: str, *, python: str = sys.executable, run_args=RUN
         if not keep:
             shutil.rmtree(work, ignore_errors=True)
     return result
+
+
+@functools.lru_cache(maxsize=1)
+def _default_sigint() -> tuple[str, ...]:
+    """A prefix that runs a command with SIGINT at its default action: a child of a background
+    process (a pytest-xdist worker) inherits it ignored, and Python then keeps it ignored.
+    GNU env does it without ``preexec_fn``, which is unsafe where threads run trials."""
+    probe = subprocess.run(["env", "--default-signal=INT", "true"], capture_output=True)
+    if probe.returncode != 0:
+        raise RuntimeError("signal_trials needs GNU env >= 8.31 (env --default-signal)")
+    return ("env", "--default-signal=INT")
 
 
 def _send(proc: subprocess.Popen, mode: str) -> None:

@@ -270,13 +270,17 @@ def main(argv=None) -> int:
     parser.add_argument("--resume-every", type=int, default=10, metavar="M",
                         help="resume every M-th interrupted trial and check it completes (0: never)")
     parser.add_argument("--python", default=sys.executable, help="the interpreter whose rippleb runs")
+    parser.add_argument("--executor-dask", action="store_true",
+                        help="run the rows on a local Dask cluster (--executor dask); give a --max-delay "
+                             "that covers its start (tens of seconds on a loaded machine)")
     args = parser.parse_args(argv)
+    run_args = RUN + (["--executor", "dask"] if args.executor_dask else [])
     rng = random.Random(args.seed)
     outcomes, failures, interrupted, start = collections.Counter(), 0, 0, time.monotonic()
     for i in range(args.n):
         delay, mode = rng.uniform(0.0, args.max_delay), rng.choice(MODES)
         resume = args.resume_every > 0 and interrupted % args.resume_every == 0
-        res = trial(delay, mode, python=args.python, timeout=args.timeout, resume=resume)
+        res = trial(delay, mode, python=args.python, run_args=run_args, timeout=args.timeout, resume=resume)
         interrupted += res["outcome"] == "interrupted"
         outcomes[res["outcome"]] += 1
         for problem in res["problems"]:

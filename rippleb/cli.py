@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import logging
 import math
 import os
 import sys
@@ -38,8 +39,10 @@ def entry() -> None:
         print("rippleb: interrupted", file=sys.stderr)
     finally:
         # The command is over and its status decided: a late signal changes nothing (while
-        # Python shuts down it would kill the process or print a traceback).
+        # Python shuts down it would kill the process or print a traceback), and neither do
+        # the libraries' logs as they shut down (Dask's, closing a cluster at exit).
         interrupts.ignore_from_now()
+        logging.disable(logging.CRITICAL)
     sys.exit(status)
 
 
@@ -64,7 +67,8 @@ def main(argv: list[str] | None = None) -> int:
         except RipplebError as exc:
             if args is not None and args.debug:
                 raise
-            print(f"rippleb: error: {exc}", file=sys.stderr)
+            kept = _interrupted(args) if getattr(exc, "resumable", False) else ""  # a lost scheduler
+            print(f"rippleb: error: {exc}{kept}", file=sys.stderr)
             return 2
         except BrokenPipeError:
             # the reader went away (`rippleb list | head`): stop quietly, like any Unix filter

@@ -224,6 +224,9 @@ def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, pro
         # The local jobs are forked by a server forked now, before the first simulation, so
         # no job's memory ever holds a truth (rippleb.forkserver). Another executor runs its
         # rows elsewhere.
+        if executor is not None and hasattr(executor, "check"):
+            with interrupts.raising():  # a bad address is bad input: refused before the directory is claimed
+                executor.check()
         server = (ForkServer.start(registry, preload=lambda: _warm(registry, plan)) if executor is None
                   else contextlib.nullcontext())
         with server, run_dir(out, resume, config, on_start) as out_dir:

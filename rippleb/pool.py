@@ -301,17 +301,16 @@ def reap_exiting(block: bool = False) -> None:
     end any that overstays its grace."""
     now = time.monotonic()
     still = []
-    for keeper, deadline in _EXITING:
+    for pid, deadline in _EXITING:
         try:
-            pid, _ = os.waitpid(keeper, os.WNOHANG)
+            if os.waitpid(pid, os.WNOHANG)[0]:
+                continue
         except ChildProcessError:  # reaped already
             continue
-        if pid:
-            continue
         if block or now > deadline:
-            _wait_keeper(keeper, max(0.0, deadline - now))
+            _wait_keeper(pid, max(0.0, deadline - now))
         else:
-            still.append((keeper, deadline))
+            still.append((pid, deadline))
     _EXITING[:] = still
 
 

@@ -115,14 +115,20 @@ def hold_from_start() -> None:
 
 
 def is_the_program() -> bool:
-    """True in the ``rippleb`` program itself: its console script, or ``python -m rippleb``
-    (while Python looks for the module, ``sys.argv[0]`` is ``-m``)."""
+    """True in the ``rippleb`` program itself: its console script, or ``python -m rippleb``.
+
+    Read from the command line this process was started with (``sys.orig_argv``), not from
+    ``sys.argv``: multiprocessing's spawned children (a local Dask cluster's workers) are
+    given their parent's ``sys.argv``, and must keep their signals.
+    """
     import os
     import sys
 
-    argv = getattr(sys, "orig_argv", [])
-    by_module = sys.argv[:1] == ["-m"] and any(a == "-m" and b == "rippleb" for a, b in zip(argv, argv[1:]))
-    return by_module or os.path.basename(sys.argv[0] if sys.argv else "") == "rippleb"
+    argv = list(getattr(sys, "orig_argv", []))
+    if any(a == "-m" and b == "rippleb" for a, b in zip(argv, argv[1:])):
+        return True
+    script = next((a for a in argv[1:] if not a.startswith("-")), "")
+    return os.path.basename(script) == "rippleb"
 
 
 def install() -> dict:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import threading
 
 #: Signals received since :func:`handling` was entered (outermost).
 _RECEIVED: list[int] = []
@@ -59,7 +60,13 @@ def check_interrupted() -> None:
 def held():
     """Record signals without raising them in this block (a job being started or ended,
     a file replaced, the run directory claimed). They are raised by the next
-    :func:`check_interrupted`; the block itself never raises for them."""
+    :func:`check_interrupted`; the block itself never raises for them.
+
+    Only the main thread holds: handlers run there, and another thread (a Dask worker's
+    task) holding would change what the main thread does."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
     _HELD[0] += 1
     try:
         yield
@@ -71,6 +78,9 @@ def held():
 def raising():
     """Raise signals at once again inside a :func:`held` block: for waits in code rippleb
     does not control (Dask's client), which only an exception can break off."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
     depth, _HELD[0] = _HELD[0], 0
     try:
         check_interrupted()

@@ -58,7 +58,8 @@ STARTUP_S = 0.3
 
 def trial(delay: float, mode: str, *, python: str = sys.executable, run_args=RUN, rows: int = ROWS,
           timeout: float = 60.0, resume: bool = False, keep: bool = False) -> dict:
-    """One interrupted run; returns ``{"outcome": ..., "problems": [...], ...}``.
+    """One interrupted run; returns ``{"outcome": ..., "problems": [...], "exit_s": ...}``
+    (``exit_s``: seconds from the signal to the command's exit).
 
     ``outcome`` is ``interrupted`` (exit 130), ``completed`` (the run ended before the
     signal, exit 0), ``before-rippleb`` (the signal came while Python was starting, before
@@ -76,8 +77,10 @@ def trial(delay: float, mode: str, *, python: str = sys.executable, run_args=RUN
     try:
         time.sleep(delay)
         _send(proc, mode)
+        sent = time.monotonic()
         try:
             stdout, stderr = proc.communicate(timeout=timeout)
+            result["exit_s"] = time.monotonic() - sent
         except subprocess.TimeoutExpired:
             result.update(outcome="hang", stderr=_processes(tag))
             result["problems"].append(f"hang: still running {timeout:g} s after the signal")
@@ -277,11 +280,14 @@ def main(argv=None) -> int:
     run_args = RUN + (["--executor", "dask"] if args.executor_dask else [])
     rng = random.Random(args.seed)
     outcomes, failures, interrupted, start = collections.Counter(), 0, 0, time.monotonic()
+    exit_s = []
     for i in range(args.n):
         delay, mode = rng.uniform(0.0, args.max_delay), rng.choice(MODES)
         resume = args.resume_every > 0 and interrupted % args.resume_every == 0
         res = trial(delay, mode, python=args.python, run_args=run_args, timeout=args.timeout, resume=resume)
         interrupted += res["outcome"] == "interrupted"
+        if res["outcome"] == "interrupted":
+            exit_s.append(res["exit_s"])
         outcomes[res["outcome"]] += 1
         for problem in res["problems"]:
             kind = problem.split(":", 1)[0]
@@ -291,7 +297,8 @@ def main(argv=None) -> int:
             print(f"trial {i}: {mode} at {delay:.3f} s: exit {res.get('code')}: {'; '.join(res['problems'])}",
                   flush=True)
     took = time.monotonic() - start
-    print(f"{args.n} trials in {took:.0f} s: {dict(sorted(outcomes.items()))}; {failures} failed")
+    slowest = f"; interrupted runs ended {max(exit_s):.1f} s after the signal at most" if exit_s else ""
+    print(f"{args.n} trials in {took:.0f} s: {dict(sorted(outcomes.items()))}; {failures} failed{slowest}")
     return 1 if failures else 0
 
 

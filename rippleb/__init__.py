@@ -5,13 +5,21 @@ The public API is re-exported here; see the README for the CLI.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from rippleb import numerics
 
 # Before anything loads numpy: the same floating-point paths on every x86-64 CPU with AVX2,
 # so a published row re-runs to the last bit (rippleb/numerics.py, docs/reproducibility.md).
 numerics.pin()
+
+from rippleb import interrupts as _interrupts  # noqa: E402
+
+if _interrupts.is_the_program():
+    # The `rippleb` command: from its first line, Ctrl-C and SIGTERM are recorded, and
+    # raised where the command can report them in one line (rippleb.cli.entry), not as a
+    # traceback from the middle of an import. Importing rippleb as a library does not do this.
+    _interrupts.hold_from_start()
+
+from typing import TYPE_CHECKING  # noqa: E402
 
 from rippleb._lazy import lazy_exports  # noqa: E402
 

@@ -1,7 +1,5 @@
 """``python -m rippleb``: the same as the ``rippleb`` command."""
 
-import sys
+from rippleb.cli import entry
 
-from rippleb.cli import main
-
-sys.exit(main())
+entry()

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import logging
 import math
 import os
 import sys
@@ -19,34 +20,72 @@ import warnings
 from pathlib import Path
 
 from rippleb.cli_options import add_seal_options, check_run_options
+from rippleb.cli_list import add_list
 from rippleb.cli_sweep import add_executor_options, add_sweep, executor
 from rippleb.errors import InputError, RipplebError
 
-PLUGIN_IMPORT_TIMEOUT_S = 20.0
 EPILOG = "Run 'rippleb COMMAND --help' for the options of one command."
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``rippleb`` script; returns the exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    # The exact command line, recorded by `run` in DIR/provenance.json and by `report`.
-    args.argv = list(sys.argv[1:] if argv is None else argv)
+def entry() -> None:
+    """The ``rippleb`` program (its console script and ``python -m rippleb``): :func:`main`,
+    with SIGINT and SIGTERM handled from its first line until the process exits."""
+    from rippleb import interrupts
+
+    status = 130
     try:
-        with _warnings_as_lines():
-            return args.func(args) or 0
-    except RipplebError as exc:
-        if args.debug:
-            raise
-        print(f"rippleb: error: {exc}", file=sys.stderr)
-        return 2
-    except BrokenPipeError:
-        # the reader went away (`rippleb list | head`): stop quietly, like any Unix filter
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 141
-    except KeyboardInterrupt:
-        print(f"rippleb: interrupted{_what_was_kept(getattr(args, 'out_dir', None) if getattr(args, 'started', False) else None, getattr(args, 'command', 'run'))}", file=sys.stderr)
-        return 130
+        interrupts.install()
+        status = main()
+    except KeyboardInterrupt:  # only in the few instructions around main's own handling
+        print("rippleb: interrupted", file=sys.stderr)
+    finally:
+        # The command is over and its status decided: a late signal changes nothing (while
+        # Python shuts down it would kill the process or print a traceback), and neither do
+        # the libraries' logs as they shut down (Dask's, closing a cluster at exit).
+        interrupts.ignore_from_now()
+        logging.disable(logging.CRITICAL)
+    sys.exit(status)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run one ``rippleb`` command line; returns the exit status.
+
+    SIGINT and SIGTERM at any moment (the imports of start-up included) end the command
+    with one line on stderr and status 130; an interrupted run says where its finished
+    rows are and how to finish it (docs/design.md, "Interrupts").
+    """
+    from rippleb import interrupts
+
+    args = None
+    with interrupts.handling():
+        try:
+            interrupts.check_interrupted()  # one that came while the program started
+            args = build_parser().parse_args(argv)
+            # The exact command line, recorded by `run` in DIR/provenance.json and by `report`.
+            args.argv = list(sys.argv[1:] if argv is None else argv)
+            with _warnings_as_lines():
+                return args.func(args) or 0
+        except RipplebError as exc:
+            if args is not None and args.debug:
+                raise
+            kept = _interrupted(args) if getattr(exc, "resumable", False) else ""  # a lost scheduler
+            print(f"rippleb: error: {exc}{kept}", file=sys.stderr)
+            return 2
+        except BrokenPipeError:
+            # the reader went away (`rippleb list | head`): stop quietly, like any Unix filter
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return 141
+        except KeyboardInterrupt:
+            print(f"rippleb: interrupted{_interrupted(args)}", file=sys.stderr)
+            return 130
+
+
+def _interrupted(args) -> str:
+    """What an interrupted command left behind: for a run that had claimed its directory,
+    its finished rows and how to finish it."""
+    if args is None or not getattr(args, "started", False):
+        return ""
+    return _what_was_kept(getattr(args, "out_dir", None), getattr(args, "command", "run"))
 
 
 def _what_was_kept(out_dir: Path | None, command: str = "run") -> str:
@@ -89,25 +128,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true", help="show tracebacks of errors")
     parser.set_defaults(func=lambda args: parser.print_help(), debug=False)
     sub = parser.add_subparsers(title="commands", metavar="COMMAND")
-    _add_list(sub)
+    add_list(sub)
     _add_run(sub)
     add_sweep(sub)
     _add_simulate(sub)
     _add_report(sub)
     return parser
-
-
-def _add_list(sub) -> None:
-    p = sub.add_parser("list", help="list methods, scenarios and deployment conditions, one line each",
-                       description="List every method with its origin (builtin, plugin, or broken "
-                                   "with its import error) and what it does (the first line of its "
-                                   "docstring), every built-in scenario with whether it is scored and "
-                                   "what it tests (the first sentence of its description), and the "
-                                   "deployment conditions. Plugins are imported in a child "
-                                   "process, each under a timeout.")
-    p.add_argument("--import-timeout", type=float, default=PLUGIN_IMPORT_TIMEOUT_S, metavar="S",
-                   help=f"seconds a plugin may take to import (default {PLUGIN_IMPORT_TIMEOUT_S:g})")
-    p.set_defaults(func=cmd_list)
 
 
 def _add_run(sub) -> None:
@@ -189,111 +215,6 @@ def _add_report(sub) -> None:
                    help="title and caveats of the project's published comparison (results/, see "
                         "docs/report.md); without it the report says it is the report of one run")
     p.set_defaults(func=cmd_report)
-
-
-#: ``rippleb list`` fits a terminal this wide; longer descriptions wrap.
-LIST_WIDTH = 100
-
-
-def cmd_list(args) -> int:
-    """``rippleb list``."""
-    from rippleb.registry import Registry
-    from rippleb.scenario import builtin_scenarios, load_scenario
-    from rippleb.simulator.conditions import CONDITIONS
-
-    registry = Registry.discover()
-    timeout = _limit("--import-timeout", args.import_timeout) or None
-    errors, docs = probe_plugins(registry, timeout)
-    print("methods:")
-    for name in registry.names():
-        entry = registry.entries[name]
-        error = entry.error or errors.get(name)
-        if error:
-            print(f"  {name:<28} {'broken':<10} {entry.source}  {error}")
-            continue
-        # a built-in's docstring is read from its source: importing every method family
-        # (numba kernels compiled on a fresh install) would make `list` take seconds
-        about = first_line(entry.doc) if entry.origin == "builtin" else docs.get(name, "")
-        print(_fit(f"  {name:<28} {entry.origin:<10} {about or entry.source}"))
-    for module, error in sorted(registry.broken_modules.items()):
-        print(f"  {'?':<28} {'broken':<8} {module}  {error}")
-    print("scenarios:")
-    for name in builtin_scenarios():
-        try:
-            scenario = load_scenario(name)
-        except RipplebError as exc:
-            print(f"  {name:<28} broken      {exc}")
-            continue
-        scored = "scored" if scenario.scored else "not scored"
-        print(_fit(f"  {name:<28} {scored:<10} {first_sentence(scenario.description)}"))
-    print("conditions (what happened between calibration and scoring):")
-    for name, text in CONDITIONS.items():
-        print(_fit(f"  {name:<28} {'':<10} {text}"))
-    return 0
-
-
-def first_line(doc: str | None) -> str:
-    """The first non-empty line of a docstring, without reST markup."""
-    lines = [line.strip() for line in (doc or "").strip().splitlines() if line.strip()]
-    return lines[0].replace("``", "") if lines else ""
-
-
-#: Words ending in a full stop that do not end a sentence.
-_ABBREVIATIONS = ("Fig", "Figs", "Sec", "Eq", "e.g", "i.e", "al", "approx", "cf")
-
-
-def first_sentence(text: str) -> str:
-    """The first sentence of ``text`` on one line (a full stop after an abbreviation such
-    as "Fig." does not end it)."""
-    import re
-
-    flat = " ".join(text.split())
-    for match in re.finditer(r"\.\s", flat):
-        word = flat[: match.start()].rsplit(" ", 1)[-1]
-        if word not in _ABBREVIATIONS:
-            return flat[: match.start() + 1]
-    return flat
-
-
-def _fit(line: str) -> str:
-    """``line`` wrapped at :data:`LIST_WIDTH`, continuation lines under the description."""
-    import textwrap
-
-    indent = " " * 42  # under the description: 2 + 28 + 1 + 10 + 1
-    return textwrap.fill(line, LIST_WIDTH, subsequent_indent=indent, break_on_hyphens=False)
-
-
-def probe_plugins(registry, timeout: float) -> tuple[dict[str, str], dict[str, str]]:
-    """Import every plugin in its own isolated child, under ``timeout`` seconds each;
-    return ``{name: one-line error}`` of those that failed and ``{name: first docstring
-    line}`` of those that loaded. The parent never runs plugin code, so a plugin that
-    hangs or exits at import delays only itself."""
-    from rippleb.errors import PluginError
-    from rippleb.pool import Pool
-
-    def job(entry):
-        def load():
-            return first_line(entry.load().__doc__).encode()
-        return load
-
-    plugins = [name for name in registry.names("plugin") if not registry.entries[name].broken]
-    pool, errors, docs = Pool(max(1, min(len(plugins), os.cpu_count() or 1))), {}, {}
-    pending = list(plugins)
-    while pending or pool.busy:
-        while pending and pool.free:
-            name = pending.pop(0)
-            pool.submit(name, job(registry.entries[name]), timeout)
-        for fin in pool.wait():
-            if fin.kind == "done":
-                docs[fin.key] = bytes(fin.value).decode(errors="replace")
-            elif fin.kind == "raised":
-                errors[fin.key] = fin.value.split("is broken: ", 1)[-1] if PluginError.__name__ in fin.value \
-                    else fin.value
-            elif fin.kind == "timeout":
-                errors[fin.key] = f"TimeoutError: import took longer than {timeout:g} s (--import-timeout)"
-            elif fin.kind != "done":
-                errors[fin.key] = f"import ended the process (exit code {fin.value})"
-    return errors, docs
 
 
 def cmd_run(args) -> int:

@@ -8,11 +8,13 @@ are imported from it when a command runs.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import time
 from pathlib import Path
 
 from rippleb.cli_options import check_sweep_options
+from rippleb.dask_connect import CONNECT_TIMEOUT_S
 from rippleb.errors import InputError
 
 
@@ -23,6 +25,9 @@ def add_executor_options(p) -> None:
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run the rows on the dask.distributed cluster of this scheduler "
                         "(e.g. tcp://10.0.0.5:8786); implies --executor dask")
+    p.add_argument("--connect-timeout", type=float, default=CONNECT_TIMEOUT_S, metavar="S",
+                   help=f"seconds the --scheduler has to answer, and to come back if it is lost mid-run "
+                        f"(default {CONNECT_TIMEOUT_S:g})")
 
 
 def executor(args):
@@ -34,7 +39,10 @@ def executor(args):
                          "on the local pool)")
     from rippleb.dask_executor import DaskExecutor
 
-    return DaskExecutor(scheduler=args.scheduler, workers=args.jobs)
+    timeout = args.connect_timeout
+    if not (math.isfinite(timeout) and timeout > 0):
+        raise InputError(f"--connect-timeout must be a positive number of seconds, got {timeout:g}")
+    return DaskExecutor(scheduler=args.scheduler, workers=args.jobs, connect_timeout=timeout)
 
 
 def add_sweep(sub) -> None:

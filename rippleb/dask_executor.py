@@ -25,14 +25,17 @@ import logging
 import time
 import uuid
 
+from rippleb import interrupts
+from rippleb.dask_connect import CONNECT_TIMEOUT_S, check_scheduler, lost
 from rippleb.dask_worker import remote_row, warm
+from rippleb.errors import EnvironmentLost, InputError
 from rippleb.numerics import openblas_threads
-from rippleb.errors import InputError
 from rippleb.results import ENVIRONMENT
 
 IN_FLIGHT_PER_THREAD = 2
-CONNECT_TIMEOUT_S = 10
 THREADS_REFRESH_S = 2.0
+#: How often the client looks for finished rows, a signal and its scheduler [s].
+POLL_S = 0.05
 
 #: Dask settings for rippleb's clusters. With Dask's defaults an idle scheduler, nanny and
 #: worker spend 1.8 %, 1.7 % and 2.9 % of a core on periodic callbacks (measured with psutil
@@ -68,43 +71,126 @@ class DaskExecutor:
         ``LocalCluster`` for the run (processes, one thread each).
     workers
         Worker processes of the local cluster (ignored with ``scheduler``).
+    connect_timeout
+        Seconds the scheduler has to answer (``--connect-timeout``).
     """
 
-    def __init__(self, scheduler: str | None = None, workers: int = 1):
+    def __init__(self, scheduler: str | None = None, workers: int = 1,
+                 connect_timeout: float = CONNECT_TIMEOUT_S):
         self.scheduler = scheduler
         self.workers = workers
+        self.connect_timeout = connect_timeout
+
+    def check(self) -> None:
+        """Raise :class:`~rippleb.errors.InputError` (one line) unless the scheduler answers;
+        the runner calls this before it claims the run directory."""
+        if self.scheduler is not None:
+            check_scheduler(self.scheduler, self.connect_timeout)
 
     def run(self, tasks: list, record) -> None:
         """Run ``tasks`` (:class:`rippleb.executors.RowTask`); call ``record(key, fields)`` in
-        this process for each row as it finishes."""
+        this process for each row as it finishes.
+
+        Runs with signals held (:mod:`rippleb.interrupts`): Dask's blocking calls are made
+        with signals raised, the rows are awaited by polling. Raises
+        :class:`~rippleb.errors.EnvironmentLost` if the scheduler is lost.
+        """
         if not tasks:
             return
-        with self._client() as client:
-            client.wait_for_workers(1)
-            warm_workers(client)
-            _stream(client, tasks, record)
+        client = None
+        try:
+            with contextlib.ExitStack() as stack:
+                stack.callback(logging.disable, logging.NOTSET)
+                with interrupts.raising():  # starting a cluster, connecting: Dask's own waits
+                    client = stack.enter_context(self._client())
+                stack.push(_quiet_on_failure(client))   # runs before the client closes
+                _await_workers(client)
+                with interrupts.raising():
+                    warm_workers(client)
+                _stream(client, tasks, record)
+        except Exception as exc:  # noqa: BLE001 - a lost scheduler surfaces as many types
+            if client is None or not lost(client):
+                raise
+            raise EnvironmentLost(f"{self._name()}: lost the scheduler mid-run ({_one_line(exc)[:160]})") from None
+
+    def _name(self) -> str:
+        return f"--scheduler {self.scheduler}" if self.scheduler is not None else "--executor dask"
 
     @contextlib.contextmanager
     def _client(self):
+        """A connected ``Client``: to the scheduler, or to a ``LocalCluster`` it owns."""
         import dask
         from distributed import Client, LocalCluster
 
         if self.scheduler is None:
             # Errors only: a cancelled task's warnings (after Ctrl-C) are not the user's business.
             # The nannies hand the configuration they were made under to their workers.
-            with dask.config.set(QUIET_CONFIG), \
-                    LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                 dashboard_address=":0", silence_logs=logging.ERROR) as cluster, \
-                    Client(cluster) as client:
-                yield client
+            with dask.config.set(QUIET_CONFIG):
+                # Held: a cluster cut short while it starts is left to Dask's atexit, which
+                # fails on it with a traceback. It starts within seconds, then goes.
+                with interrupts.held(), _sigint_blocked():
+                    cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                           dashboard_address=":0", silence_logs=logging.ERROR)
+                with cluster:
+                    with interrupts.held():
+                        client = Client(cluster)
+                    with client:
+                        interrupts.check_interrupted()
+                        yield client
             return
         try:
-            client = Client(self.scheduler, timeout=CONNECT_TIMEOUT_S)
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise InputError(f"--scheduler {self.scheduler}: cannot connect ({type(exc).__name__}: "
-                             f"{str(exc).splitlines()[0] if str(exc) else 'no answer'})") from None
+            client = Client(self.scheduler, timeout=self.connect_timeout)
+        except Exception as exc:  # noqa: BLE001 - it answered check() a moment ago: it is lost
+            raise EnvironmentLost(f"{self._name()}: cannot connect any more ({_one_line(exc)[:160]})") from None
         with client:
             yield client
+
+
+@contextlib.contextmanager
+def _sigint_blocked():
+    """Block SIGINT in this thread while the local cluster starts: the thread Dask starts
+    for its event loop, and the worker processes that thread spawns, inherit the mask. So a
+    Ctrl-C in the terminal, which reaches the whole process group, reaches only this process
+    (which ends the cluster), not the workers, which would each print a traceback. Here the
+    signal waits, and is handled once the cluster has started.
+
+    multiprocessing's resource tracker is started first: starting it unblocks SIGINT in the
+    calling thread (``SIG_UNBLOCK``, not the mask it found), which would undo this.
+    """
+    import signal
+    from multiprocessing import resource_tracker
+
+    resource_tracker.ensure_running()
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def _quiet_on_failure(client):
+    """An exit callback: if the run ends by an exception (Ctrl-C, a lost scheduler),
+    silence logging while the client and its cluster close. Dask logs errors with
+    tracebacks as they go (broadcasts cut short, a reconnection given up), and the user
+    gets the one line that says what happened."""
+    def quiet(exc_type, exc, tb) -> bool:
+        if exc_type is not None or lost(client):
+            logging.disable(logging.CRITICAL)
+        return False
+    return quiet
+
+
+def _await_workers(client) -> None:
+    """Wait until a worker has joined (on a batch system they may queue for hours),
+    looking for a signal and for the scheduler between short waits."""
+    while True:
+        interrupts.check_interrupted()
+        try:
+            client.wait_for_workers(1, timeout=1.0)
+            return
+        except TimeoutError:
+            if lost(client):
+                raise
 
 
 def warm_workers(client) -> None:
@@ -122,17 +208,19 @@ def warm_workers(client) -> None:
 
 
 def _stream(client, tasks: list, record) -> None:
+    """Submit ``tasks`` a few at a time and record each row as it comes back, until all are
+    recorded, a signal arrives (``KeyboardInterrupt``) or the scheduler is lost (the rows
+    then in flight are left to ``--resume``)."""
     from distributed import as_completed
 
-    from rippleb.scheduler import check_interrupted
-
-    client.wait_for_workers(1)
     dispatch = _Dispatch(client, tasks)
     stream = as_completed()
     blas = openblas_threads()
     in_flight: dict = {}
 
     def top_up():
+        if dispatch.left() and lost(client):
+            raise ConnectionError("the scheduler stopped answering")
         for task, worker in dispatch.take():
             future = client.submit(remote_row, task, blas, key=f"rippleb-row-{uuid.uuid4().hex}", pure=False,
                                    workers=[worker], allow_other_workers=True)
@@ -140,16 +228,24 @@ def _stream(client, tasks: list, record) -> None:
             stream.add(future)
     try:
         top_up()
-        for future in stream:
-            check_interrupted()
-            task, worker = in_flight.pop(future)
-            dispatch.done(worker)
-            record(task.key, _fields(future))
-            future.release()
-            top_up()
+        while in_flight:
+            interrupts.check_interrupted()
+            batch = stream.next_batch(block=False)
+            if not batch:
+                if lost(client):
+                    raise ConnectionError("the scheduler stopped answering")
+                time.sleep(POLL_S)
+            for future in batch:
+                task, worker = in_flight.pop(future)
+                dispatch.done(worker)
+                record(task.key, _fields(future))
+                future.release()
+            if batch:
+                top_up()
     finally:
-        if in_flight:  # Ctrl-C or an error: the rows not recorded are left to --resume
-            client.cancel(list(in_flight))
+        if in_flight and not lost(client):  # Ctrl-C or an error: the rows not recorded are left to --resume
+            with contextlib.suppress(Exception):
+                client.cancel(list(in_flight))
 
 
 class _Dispatch:
@@ -189,6 +285,10 @@ class _Dispatch:
 
     def done(self, worker: str) -> None:
         self.busy[worker] -= 1
+
+    def left(self) -> bool:
+        """True while some task has not been handed out."""
+        return any(self.groups.values())
 
     def _next_for(self, worker: str):
         mine = [g for g, w in self.owner.items() if w == worker and self.groups.get(g)]

@@ -14,3 +14,10 @@ class InputError(RipplebError, ValueError):
 
 class PluginError(RipplebError):
     """A method plugin that cannot be loaded or that clashes with another."""
+
+
+class EnvironmentLost(RipplebError):
+    """What a run needs went away mid-run (a Dask scheduler): one line, exit 2, and the
+    run can be finished with ``--resume`` (the CLI adds what was kept and the command)."""
+
+    resumable = True

@@ -24,7 +24,9 @@ import contextlib
 import ctypes
 import functools
 import os
+import select
 import signal
+import time
 
 CLONE_NEWUSER = 0x10000000
 CLONE_NEWPID = 0x20000000
@@ -121,15 +123,44 @@ def end_descendants(rounds: int = 50) -> None:
     reap_exited()
 
 
-def reap_exited() -> None:
-    """Collect every child that has already exited, without blocking."""
+def reap_exited() -> list[int]:
+    """Collect every child that has already exited, without blocking; return their PIDs."""
+    reaped = []
     while True:
         try:
             pid, _ = os.waitpid(-1, os.WNOHANG)
         except ChildProcessError:
-            return
+            return reaped
         if pid == 0:
-            return
+            return reaped
+        reaped.append(pid)
+
+
+def wait_exit(pid: int, timeout: float) -> bool:
+    """Reap the child ``pid`` if it exits within ``timeout`` seconds; False if it is still
+    running then. True also if it was reaped already."""
+    deadline = time.monotonic() + timeout
+    try:
+        fd = os.pidfd_open(pid)
+    except (AttributeError, OSError):  # no process file descriptors: poll
+        fd = None
+    try:
+        while True:
+            try:
+                if os.waitpid(pid, os.WNOHANG)[0]:
+                    return True
+            except ChildProcessError:
+                return True
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return False
+            if fd is None:
+                time.sleep(min(left, 0.01))
+            else:
+                select.select([fd], [], [], left)
+    finally:
+        if fd is not None:
+            os.close(fd)
 
 
 def close_fds_except(*keep: int) -> None:

@@ -2,12 +2,18 @@
 
 Why not joblib or multiprocessing: a method that sleeps forever, allocates without bound,
 forks, or signals its process group must cost exactly its own row. Every job therefore
-runs in its own pair of forked processes (see :mod:`rippleb.isolation`): a *keeper*
-(rippleb's code: new session, new PID namespace where permitted, child subreaper) and
-the *worker* it forks, which runs the job with a memory limit (``RLIMIT_AS``, soft and
-hard, so the job cannot lift it), with every inherited file descriptor closed but its
-result pipe, and with its output going to a file. At the job's deadline, or when the job
-ends, the worker and everything it started are killed.
+runs in its own pair of forked processes (:mod:`rippleb.keeper`, :mod:`rippleb.isolation`):
+a *keeper* (rippleb's code: new session, new PID namespace where permitted, child
+subreaper) and the *worker* it forks, which runs the job with a memory limit
+(``RLIMIT_AS``, soft and hard, so the job cannot lift it), with every inherited file
+descriptor closed but its result pipe, and with
+its output going to a file. At the job's deadline, or when the job ends, the worker and
+everything it started are killed.
+
+No wait here is unbounded, and none ignores Ctrl-C or SIGTERM (:mod:`rippleb.interrupts`):
+:meth:`Pool.wait` polls for them, a job is started and ended with signals held, so none
+is ever half started or half ended, and :meth:`Pool.kill_all` ends every job within a
+few seconds, even one whose keeper is stuck.
 
 In a local run the keepers are forked by a fork server (:mod:`rippleb.forkserver`) that
 was forked before the first simulation, so no job's memory holds a truth; without a server
@@ -23,20 +29,16 @@ from __future__ import annotations
 
 import atexit
 import contextlib
-import errno
 import functools
-import gc
 import os
-import resource
 import select
 import signal
 import sys
 import time
-import traceback
 from dataclasses import dataclass, field
 
-from rippleb import isolation
-from rippleb.registry import one_line
+from rippleb import interrupts
+from rippleb.keeper import keeper
 
 POLL_S = 0.2
 KEEPER_GRACE_S = 5.0
@@ -122,35 +124,48 @@ class Pool:
                max_bytes: int | None = None) -> None:
         """Start ``fn`` (see ``context``) in an isolated worker; its stdout and stderr go to
         the file ``output`` (or /dev/null), so a chatty plugin cannot garble the CLI's output."""
-        reap_exiting()
-        result_r, result_w = os.pipe()
-        ctrl_r, ctrl_w = os.pipe()
-        try:
-            if self.server is not None:
-                pid = self.server.spawn(fn, result_w, ctrl_w, self.memory_mb, output)
-            else:
-                bound = fn if self.context is None else functools.partial(fn, self.context)
-                sys.stdout.flush()
-                sys.stderr.flush()
-                pid = os.fork()
-                if pid == 0:
-                    keeper(bound, result_w, ctrl_w, self.memory_mb, output)  # never returns
-        finally:  # the keeper holds the write ends now (or no keeper started)
-            os.close(result_w)
-            os.close(ctrl_w)
-        for fd in (result_r, ctrl_r):
-            os.set_blocking(fd, False)
-        now = time.monotonic()
-        self._running.append(_Running(key, pid, result_r, ctrl_r, now, now + timeout if timeout else None,
-                                      max_bytes or DEFAULT_MAX_BYTES, direct=self.server is None))
+        # Held: a keeper started but not yet tracked would be orphaned with its pipes open.
+        with interrupts.held():
+            reap_exiting()
+            result_r, result_w = os.pipe()
+            ctrl_r, ctrl_w = os.pipe()
+            pid = None
+            try:
+                pid = self._start_keeper(fn, result_w, ctrl_w, output)
+            finally:  # the keeper holds the write ends now (or no keeper started)
+                os.close(result_w)
+                os.close(ctrl_w)
+                if pid is None:  # interrupted while the server was busy: a keeper it forks
+                    os.close(result_r)   # later finds these closed and ends its worker
+                    os.close(ctrl_r)
+            for fd in (result_r, ctrl_r):
+                os.set_blocking(fd, False)
+            now = time.monotonic()
+            self._running.append(_Running(key, pid, result_r, ctrl_r, now, now + timeout if timeout else None,
+                                          max_bytes or DEFAULT_MAX_BYTES, direct=self.server is None))
+
+    def _start_keeper(self, fn, result_w: int, ctrl_w: int, output) -> int:
+        if self.server is not None:
+            return self.server.spawn(fn, result_w, ctrl_w, self.memory_mb, output)
+        bound = fn if self.context is None else functools.partial(fn, self.context)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        pid = os.fork()
+        if pid == 0:
+            keeper(bound, result_w, ctrl_w, self.memory_mb, output)  # never returns
+        return pid
 
     def wait(self) -> list[Finished]:
-        """Block until at least one job ends (or passes its deadline); return those that did."""
+        """Block until at least one job ends (or passes its deadline); return those that did.
+        Raises ``KeyboardInterrupt`` once SIGINT or SIGTERM has arrived (the jobs run on:
+        :meth:`kill_all` ends them)."""
         while True:
-            finished = self._collect()
-            reap_exiting()
+            with interrupts.held():
+                finished = self._collect()
+                reap_exiting()
             if finished or not self._running:
                 return finished
+            interrupts.check_interrupted()
             deadlines = [r.deadline for r in self._running if r.deadline is not None]
             # Wake at least every POLL_S: a signal caught by another thread (tqdm's
             # monitor, a timer) only runs its Python handler once the main thread wakes.
@@ -161,11 +176,14 @@ class Pool:
                 select.select(fds, [], [], timeout)
 
     def kill_all(self) -> None:
-        """End every running job and its processes now (used on SIGINT/SIGTERM)."""
-        for run in self._running:
-            _end(run)
-        self._running.clear()
-        reap_exiting()
+        """End every running job and its processes now (used on SIGINT/SIGTERM): the
+        workers are killed together, so their keepers clean up side by side, then each
+        keeper is awaited for a bounded time."""
+        with interrupts.held():
+            _kill_workers(self._running)
+            while self._running:
+                _end(self._running.pop())
+            reap_exiting()
 
     def _collect(self) -> list[Finished]:
         done, now = [], time.monotonic()
@@ -215,6 +233,24 @@ def _read(run: _Running) -> None:
             buf += chunk
 
 
+def _kill_workers(runs: list[_Running], wait_s: float = 1.0) -> None:
+    """SIGKILL the worker of each of ``runs``; a keeper forked a moment ago may not have
+    named its worker yet, so wait up to ``wait_s`` (in all) for those lines."""
+    deadline = time.monotonic() + wait_s
+    while True:
+        for run in runs:
+            _read(run)
+        unknown = [r.ctrl_fd for r in runs if r.worker is None and not r.ctrl_eof]
+        if not unknown or time.monotonic() >= deadline:
+            break
+        with contextlib.suppress(InterruptedError):
+            select.select(unknown, [], [], 0.05)
+    for run in runs:
+        if run.exit_code is None and run.worker is not None:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.kill(run.worker, signal.SIGKILL)
+
+
 def _end(run: _Running, exiting: list | None = None) -> None:
     """Kill the worker (and so its namespace), let the keeper clean up, reap the keeper.
 
@@ -228,6 +264,8 @@ def _end(run: _Running, exiting: list | None = None) -> None:
     if run.exit_code is None and run.worker is not None:
         with contextlib.suppress(ProcessLookupError, PermissionError):
             os.kill(run.worker, signal.SIGKILL)
+    elif run.exit_code is None and not run.ctrl_eof:
+        _kill_keeper(run.keeper)  # it never named its worker: the worker dies with it (PDEATHSIG)
     if not run.direct:  # the fork server reaps it: only make sure it is gone
         if run.exit_code is None:
             _await_keeper_exit(run)
@@ -264,17 +302,16 @@ def reap_exiting(block: bool = False) -> None:
     end any that overstays its grace."""
     now = time.monotonic()
     still = []
-    for keeper, deadline in _EXITING:
+    for pid, deadline in _EXITING:
         try:
-            pid, _ = os.waitpid(keeper, os.WNOHANG)
+            if os.waitpid(pid, os.WNOHANG)[0]:
+                continue
         except ChildProcessError:  # reaped already
             continue
-        if pid:
-            continue
         if block or now > deadline:
-            _wait_keeper(keeper, max(0.0, deadline - now))
+            _wait_keeper(pid, max(0.0, deadline - now))
         else:
-            still.append((keeper, deadline))
+            still.append((pid, deadline))
     _EXITING[:] = still
 
 
@@ -290,8 +327,7 @@ def _await_keeper_exit(run: _Running, grace_s: float = KEEPER_GRACE_S) -> None:
             select.select([run.ctrl_fd], [], [], 0.05)
         _read(run)
     if not run.ctrl_eof:
-        with contextlib.suppress(ProcessLookupError, PermissionError):
-            os.killpg(run.keeper, signal.SIGKILL)
+        _kill_keeper(run.keeper)
 
 
 def _wait_keeper(keeper: int, grace_s: float = KEEPER_GRACE_S) -> None:
@@ -303,121 +339,12 @@ def _wait_keeper(keeper: int, grace_s: float = KEEPER_GRACE_S) -> None:
             break
         time.sleep(0.005)
     if not pid:  # the keeper did not finish its cleanup in time: end its whole session
+        _kill_keeper(keeper)
+        os.waitpid(keeper, 0)  # SIGKILL cannot be caught: this returns at once
+
+
+def _kill_keeper(keeper: int) -> None:
+    """SIGKILL a keeper and its session (one not yet in a session of its own, too)."""
+    for kill in (os.killpg, os.kill):
         with contextlib.suppress(ProcessLookupError, PermissionError):
-            os.killpg(keeper, signal.SIGKILL)
-        os.waitpid(keeper, 0)
-
-
-def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output) -> None:
-    """rippleb's own process between the runner and a job: session, namespace, cleanup.
-    Runs ``fn()`` in a worker it forks; never returns."""
-    try:
-        _keep_inherited_pages_shared()
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
-        os.setsid()
-        isolation.close_fds_except(result_w, ctrl_w)
-        isolated = isolation.new_pid_namespace()
-        isolation.become_subreaper()
-        worker = os.fork()
-        if worker == 0:
-            # Its own process group: a worker that signals "its" group (killpg(0, ...), or
-            # kill(0, ...), which is what kill(getppid()) becomes inside a PID namespace)
-            # must not reach the keeper, whose death would lose the row it reports.
-            os.setpgid(0, 0)
-            os.close(ctrl_w)
-            _worker(fn, result_w, memory_mb, output)  # never returns
-        os.close(result_w)
-        _write_all(ctrl_w, f"{worker} {int(isolated)}\n".encode())
-        _, status = os.waitpid(worker, 0)
-        if isolated:  # the kernel ended the namespace with its first process: nothing left to hunt
-            isolation.reap_exited()
-        else:
-            isolation.end_descendants()
-        _write_all(ctrl_w, f"{os.waitstatus_to_exitcode(status)}\n".encode())
-    finally:
-        os._exit(0)
-
-
-def _worker(fn, result_w: int, memory_mb, output) -> None:
-    message = b"R" + b"worker did not start"
-    try:
-        _keep_inherited_pages_shared()
-        isolation.die_with_parent()
-        isolation.close_fds_except(result_w)
-        _redirect_output(output)
-        _limit_memory(memory_mb)
-        try:
-            payload = fn()
-            message = b"D" + bytes(payload)
-        except BaseException as exc:  # everything a plugin can raise becomes a row status
-            traceback.print_exc()
-            message = b"R" + one_line(exc).encode()
-        _write_all(result_w, message)
-        os.close(result_w)
-        sys.stdout.flush()
-        sys.stderr.flush()
-    finally:
-        # Skip the parent's atexit handlers and buffered files (pytest, tqdm) in the child.
-        os._exit(0)
-
-
-def _keep_inherited_pages_shared() -> None:
-    """Exclude every object inherited from the runner from this process's garbage
-    collections: a collection writes to each object it visits, and so would copy, page by
-    page, the whole runner's heap that the fork shares (tens of milliseconds per job)."""
-    gc.freeze()
-
-
-def _write_all(fd: int, data: bytes) -> None:
-    view = memoryview(data)
-    while view:
-        try:
-            n = os.write(fd, view)
-        except InterruptedError:
-            continue
-        except OSError as exc:
-            if exc.errno == errno.EPIPE:
-                return
-            raise
-        view = view[n:]
-
-
-def _redirect_output(path: str | None) -> None:
-    null = os.open(os.devnull, os.O_RDONLY)
-    os.dup2(null, 0)
-    os.close(null)
-    fd = os.open(path or os.devnull, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-    os.dup2(fd, 1)
-    os.dup2(fd, 2)
-    os.close(fd)
-    # sys.stdout/stderr may be wrappers that bypass fds 1 and 2 (pytest, IDEs): rebind them.
-    sys.stdout = open(1, "w", buffering=1, closefd=False)
-    sys.stderr = open(2, "w", buffering=1, closefd=False)
-
-
-def _limit_memory(memory_mb: float | None) -> None:
-    """Cap the address space at what the worker inherited plus ``memory_mb``.
-
-    RLIMIT_AS counts the mappings inherited from the parent (numpy, scipy, Pinocchio
-    and their thread stacks reserve much address space), so an absolute cap would be
-    meaningless; the cap is relative to the size at fork time.
-
-    Both the soft and the hard limit are set: an unprivileged process may raise its soft
-    limit up to its hard one, so a soft cap alone is one ``setrlimit`` call away from
-    gone (issue 25: a plugin lifted it and held 1.5 GiB under ``--memory-limit 200``).
-    Lowering the hard limit cannot be undone without privileges. The call happens only
-    here, in the forked worker: the keeper, the fork server and the runner keep theirs.
-    """
-    if memory_mb is None:
-        return
-    try:
-        with open("/proc/self/statm") as fh:
-            current = int(fh.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
-        limit = current + int(memory_mb * 2**20)
-        _, hard = resource.getrlimit(resource.RLIMIT_AS)
-        if hard != resource.RLIM_INFINITY:
-            limit = min(limit, hard)
-        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
-    except (OSError, ValueError):
-        pass  # not Linux: run without a memory limit rather than refuse to run
+            kill(keeper, signal.SIGKILL)

@@ -22,9 +22,13 @@ from rippleb.results import RunWarning
 
 
 @contextlib.contextmanager
-def run_dir(out, resume: bool, config: dict):
-    """Create (or, to resume, check) the run directory and hold its lock while the run writes."""
+def run_dir(out, resume: bool, config: dict, on_start=None):
+    """Create (or, to resume, check) the run directory and hold its lock while the run writes;
+    ``on_start()``, if given, is called once the directory is this run's (``run.json``
+    written or checked), before any job starts."""
     if out is None:
+        if on_start is not None:
+            on_start()
         yield None
         return
     out = Path(out)
@@ -46,6 +50,8 @@ def run_dir(out, resume: bool, config: dict):
                                  f"--resume {out}, or choose another --out")
             with atomic_path(out / "run.json") as tmp:
                 tmp.write_text(json.dumps(config, indent=1) + "\n")
+        if on_start is not None:
+            on_start()
         yield out
 
 

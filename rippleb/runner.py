@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rippleb import interrupts
 from rippleb import jobs as job_fns
 from rippleb import numerics, sealing
 from rippleb.cache import digest, log_bytes
@@ -51,8 +52,7 @@ from rippleb.results import ResultsFile, RunWarning, row_key, say_other_versions
 from rippleb.rows import (CALIBRATION, FITTING, SCORED, Case, RowKey, scenario_hash, select_conditions,
                           select_scenarios, split_names)
 from rippleb.rundir import log_dir, read_config, run_dir
-from rippleb.scheduler import (Plan, State, prepare_cases, progress_bar, record, say_retried, schedule,
-                               sigterm_as_interrupt)
+from rippleb.scheduler import Plan, State, prepare_cases, progress_bar, record, say_retried, schedule
 
 __all__ = ["run", "run_log", "resolve_methods", "read_config", "check_scenario", "evaluate",
            "default_out_dir", "DEFAULT_SEEDS", "MAX_SEEDS", "DEFAULT_TIMEOUT_S", "DEFAULT_MEMORY_MB"]
@@ -268,34 +268,45 @@ def resolve_methods(registry: Registry, methods) -> list[str]:
 
 def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, progress, config,
              on_start=None, executor=None, sealed=None, salt_file=None):
-    # The local jobs are forked by a server forked now, before the first simulation, so
-    # no job's memory ever holds a truth (rippleb.forkserver). Another executor runs its
-    # rows elsewhere.
-    server = (ForkServer.start(registry, preload=lambda: _warm(registry, plan)) if executor is None
-              else contextlib.nullcontext())
-    seal, started = None, False
-    try:
-        with server:
-            # After the fork: the server, and every row it forks, never holds the salt.
-            seal = sealing.open_seal(out, resume, config, sealed=sealed, salt_file=salt_file)
-            sealing.protect(seal)
-            with run_dir(out, resume, config) as out_dir:
-                started = out_dir is not None
-                return _run_rows(registry, plan, out_dir, jobs=jobs, timeout=timeout, memory_mb=memory_mb,
-                                 resume=resume, progress=progress, on_start=on_start, executor=executor,
-                                 server=server, seal=seal)
-    finally:  # every job has ended (the server reaped them): only now may a salt file exist
-        sealing.release(seal, started)
+    # Signals are held from here on and raised only where stopping leaves nothing half
+    # done (rippleb.interrupts): the loops between jobs and the waits, which poll. So an
+    # interrupt never orphans a job, a half-claimed run directory or a temporary file.
+    with interrupts.handling(), interrupts.held():
+        if executor is not None and hasattr(executor, "check"):
+            with interrupts.raising():  # a bad address is bad input: refused before the directory is claimed
+                executor.check()
+        # The local jobs are forked by a server forked now, before the first simulation, so
+        # no job's memory ever holds a truth (rippleb.forkserver). Another executor runs its
+        # rows elsewhere.
+        server = (ForkServer.start(registry, preload=lambda: _warm(registry, plan)) if executor is None
+                  else contextlib.nullcontext())
+        seal, started = None, False
+        try:
+            with server:
+                # After the fork: the server, and every row it forks, never holds the salt.
+                seal = sealing.open_seal(out, resume, config, sealed=sealed, salt_file=salt_file)
+                sealing.protect(seal)
+                with run_dir(out, resume, config, on_start) as out_dir:
+                    started = out_dir is not None
+                    interrupts.check_interrupted()
+                    if seal is not None:
+                        _warm_simulator(plan)  # sealed simulations are forked from here (rippleb.sealing)
+                    results = ResultsFile(out_dir / "results.csv" if out_dir else None, resume=resume)
+                    try:
+                        _run_rows(registry, plan, results, out_dir, resume=resume, jobs=jobs, timeout=timeout,
+                                  memory_mb=memory_mb, progress=progress, server=server, executor=executor,
+                                  seal=seal)
+                    finally:  # finished or interrupted: the file in key order, from the rows in memory
+                        if results.rows:
+                            results.flush()
+        finally:  # every job has ended (the server reaped them): only now may a salt file exist
+            sealing.release(seal, started)
+    return results.frame()
 
 
-def _run_rows(registry, plan: Plan, out_dir, *, jobs, timeout, memory_mb, resume, progress, on_start,
-              executor, server, seal):
-    """Run the rows of ``plan`` missing from ``out_dir`` (the directory is checked and locked)."""
-    if on_start is not None:
-        on_start()
-    if seal is not None:
-        _warm_simulator(plan)  # sealed simulations are forked from here (rippleb.sealing)
-    results = ResultsFile(out_dir / "results.csv" if out_dir else None, resume=resume)
+def _run_rows(registry, plan: Plan, results: ResultsFile, out_dir, *, resume, jobs, timeout, memory_mb,
+              progress, server, executor, seal) -> None:
+    """Run the rows of ``plan`` not yet in ``results`` and record each as it ends."""
     if resume:
         say_retried(results.drop_environmental(), out_dir)
     done = results.done_keys()
@@ -305,22 +316,17 @@ def _run_rows(registry, plan: Plan, out_dir, *, jobs, timeout, memory_mb, resume
                   key=lambda k: (k.seed, k.scenario, k.extra, k.condition, k.method))
     if resume and rows:
         say_other_versions(results.rows, out_dir)
-    try:
-        with tempfile.TemporaryDirectory(prefix="rippleb-cache-") as cache:
-            state = State(plan, registry, results, Path(cache), log_dir(out_dir), timeout,
-                           time.strftime("%Y%m%dT%H%M%S"), rows, seal=seal)
-            with progress_bar(len(rows), progress) as bar, sigterm_as_interrupt():
-                prepare_cases(state)
-                if executor is None:
-                    schedule(Pool(int(jobs), memory_mb, server=server), state, bar)
-                else:  # whole rows run elsewhere; this process only records them
-                    executor.run(row_tasks(state, memory_mb),
-                                 lambda key, fields: record(state, key, bar, **fields))
-                    _warn_native_rows(results.rows)
-    finally:  # finished or interrupted: the file in key order, from the rows in memory
-        if results.rows:
-            results.flush()
-    return results.frame()
+    with tempfile.TemporaryDirectory(prefix="rippleb-cache-") as cache:
+        state = State(plan, registry, results, Path(cache), log_dir(out_dir), timeout,
+                      time.strftime("%Y%m%dT%H%M%S"), rows, seal=seal)
+        with progress_bar(len(rows), progress) as bar:
+            prepare_cases(state)
+            interrupts.check_interrupted()
+            if executor is None:
+                schedule(Pool(int(jobs), memory_mb, server=server), state, bar)
+            else:  # whole rows run elsewhere; this process only records them
+                executor.run(row_tasks(state, memory_mb), lambda key, fields: record(state, key, bar, **fields))
+                _warn_native_rows(results.rows)
 
 
 def _warm_simulator(plan: Plan) -> None:

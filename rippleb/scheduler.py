@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from rippleb import jobs as job_fns
+from rippleb.interrupts import check_interrupted
 from rippleb.cache import Artefact, TamperedError, digest, load_log, log_bytes, store, unpack
 from rippleb.data import SensorLog
 from rippleb.metrics import tick_stats
@@ -109,6 +110,12 @@ def _lengths(log: SensorLog) -> tuple[int, int]:
 
 
 def schedule(pool: Pool, state: State, bar) -> None:
+    """Run the pending jobs of ``state`` on ``pool`` and record every row.
+
+    Raises ``KeyboardInterrupt`` between jobs once SIGINT or SIGTERM has arrived
+    (:mod:`rippleb.interrupts`; the pool's waits poll for them); the rows that had ended
+    are recorded first, and the running jobs ended, so ``--resume`` runs just those.
+    """
     finished_rows = []   # rows ended but not yet scored
     try:
         while state.pending or pool.busy or finished_rows:
@@ -374,43 +381,3 @@ def progress_bar(total: int, enabled):
     with tqdm(total=total, disable=(None if enabled is None else not enabled), file=sys.stderr,
               unit="row", dynamic_ncols=True) as bar:
         yield bar
-
-
-#: Signals received while a run is under way (see :func:`sigterm_as_interrupt`).
-_RECEIVED: list[int] = []
-
-
-def check_interrupted() -> None:
-    """Raise ``KeyboardInterrupt`` if an interrupt arrived but its exception was lost.
-
-    Python raises a signal's exception wherever the main thread happens to be; inside a
-    callback whose exceptions are ignored (the at-fork handlers the runner passes through
-    twice per job, a ``__del__``), it is printed and dropped, and the run would go on.
-    The scheduling loops call this between jobs, so no interrupt is lost.
-    """
-    if _RECEIVED:
-        raise KeyboardInterrupt(f"signal {_RECEIVED[0]}")
-
-
-@contextlib.contextmanager
-def sigterm_as_interrupt():
-    """Treat SIGTERM like Ctrl-C, so that both end with the finished rows on disk, and
-    remember either (:func:`check_interrupted`). A SIGINT that is ignored (a background
-    process) stays ignored."""
-    def handler(signum, frame):
-        _RECEIVED.append(signum)
-        raise KeyboardInterrupt(f"signal {signum}")
-    _RECEIVED.clear()
-    try:
-        previous = {signal.SIGTERM: signal.signal(signal.SIGTERM, handler)}
-        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
-            previous[signal.SIGINT] = signal.signal(signal.SIGINT, handler)
-    except ValueError:  # not the main thread: leave signals alone
-        yield
-        return
-    try:
-        yield
-    finally:
-        for signum, old in previous.items():
-            signal.signal(signum, old)
-        _RECEIVED.clear()

@@ -154,5 +154,39 @@ def test_a_worker_killed_mid_run_loses_no_row(cluster, tmp_path):
     assert cluster.workers[0].poll() is not None
     assert "Remove worker" in (cluster.tmp / "scheduler.log").read_text()
 
+def test_a_scheduler_killed_mid_run_is_one_line_and_the_run_resumable(tmp_path):
+    """Before: a ``RuntimeError: ConnectionPool is closed`` traceback and exit 1 (issue 25)."""
+    own = Cluster(tmp_path, n=2)   # its own: the module's cluster serves the other tests
+    out, run = tmp_path / "run", None
+    try:
+        own.wait_for_workers(2)
+        run = subprocess.Popen([str(BIN / "rippleb"), "run", "--methods", "raw,lowpass,kalman-ripple",
+                                "--scenarios", "paper-quintic,reversal", "--seeds", "3", "--no-progress",
+                                "--scheduler", own.address, "--out", str(out)],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 300
+        while not (out / "results.csv").is_file() and time.monotonic() < deadline and run.poll() is None:
+            time.sleep(0.1)
+        assert run.poll() is None, "the run ended before the scheduler could be killed"
+        _stop(own.scheduler)
+        _, stderr = run.communicate(timeout=120)   # a lost scheduler must not keep it waiting
+    finally:
+        if run is not None and run.poll() is None:
+            run.kill()
+            run.wait()
+        own.close()
+    assert run.returncode == 2 and len(stderr.splitlines()) == 1, stderr
+    assert stderr.startswith(f"rippleb: error: --scheduler {own.address}: lost the scheduler mid-run")
+    assert stderr.rstrip().endswith(f"finish the run with: rippleb run --resume {out}")
+    kept = pd.read_csv(out / "results.csv")
+    assert 1 <= len(kept) < 18
+    assert kept.loc[kept.status != "ok", "message"].str.startswith("environment: ").all()
+
+    resumed = rippleb("run", "--resume", out, "--jobs", "2", "--no-progress")   # on the local pool
+    assert resumed.returncode == 0, resumed.stderr
+    rows = pd.read_csv(out / "results.csv")
+    assert len(rows) == 18 and (rows.status == "ok").all()
+
+
 # ``--executor dask`` (a local cluster the run starts and closes) is tested with a hostile
 # plugin in tests/test_integrity.py (test_dask_rows_cannot_find_the_truth_either).

@@ -5,19 +5,20 @@ The public API is re-exported here; see the README for the CLI.
 
 from __future__ import annotations
 
-from rippleb import numerics
-
-# Before anything loads numpy: the same floating-point paths on every x86-64 CPU with AVX2,
-# so a published row re-runs to the last bit (rippleb/numerics.py, docs/reproducibility.md).
-numerics.pin()
-
-from rippleb import interrupts as _interrupts  # noqa: E402
+from rippleb import interrupts as _interrupts
 
 if _interrupts.is_the_program():
     # The `rippleb` command: from its first line, Ctrl-C and SIGTERM are recorded, and
     # raised where the command can report them in one line (rippleb.cli.entry), not as a
     # traceback from the middle of an import. Importing rippleb as a library does not do this.
     _interrupts.hold_from_start()
+
+from rippleb import numerics  # noqa: E402
+
+# Before anything loads numpy (rippleb.interrupts does not): the same floating-point paths
+# on every x86-64 CPU with AVX2, so a published row re-runs to the last bit
+# (rippleb/numerics.py, docs/reproducibility.md).
+numerics.pin()
 
 from typing import TYPE_CHECKING  # noqa: E402
 

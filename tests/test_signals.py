@@ -264,8 +264,6 @@ def test_interrupts_at_random_moments_end_every_run_cleanly():
     assert not failed, "\n".join(failed)
     outcomes = {r["outcome"] for r in results}
     assert "interrupted" in outcomes, outcomes   # the signals did land in runs
-    interrupted_with_rows = [r for r in results if r["outcome"] == "interrupted" and r.get("rows")]
-    assert all(r["rows"] <= 2 for r in interrupted_with_rows)
 
 
 def test_the_trial_checker_sees_a_traceback_and_a_lost_row(tmp_path):

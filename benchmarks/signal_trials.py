@@ -23,7 +23,8 @@ second apart (an impatient user). It then checks, and counts as a failure:
   finished, a row count other than that line's, or a row that is not ``ok`` (an
   interrupted row must be left to ``--resume``, not recorded as failed);
 * **leftovers**: a process of the trial still alive 2 s after the command exited (found by
-  a marker in its environment), or a ``rippleb-cache-*`` directory left in its ``TMPDIR``;
+  a marker in its environment), a ``rippleb-cache-*`` directory left in its ``TMPDIR``, or
+  git's ``index.lock`` left in the checkout rippleb runs from (a run records its git state);
 * **resume** (every ``--resume-every``-th interrupted trial): ``rippleb run --resume DIR``
   must exit 0 with every row ``ok`` and the kept rows not run again.
 
@@ -90,6 +91,7 @@ def trial(delay: float, mode: str, *, python: str = sys.executable, run_args=RUN
         result.update(code=proc.returncode, stderr=stderr.strip())
         _check(result, stdout, stderr, out, rows)
         _check_leftovers(result, tag, tmp)
+        _check_git_lock(result, python)
         if resume and result["outcome"] == "interrupted" and (out / "run.json").is_file():
             _check_resume(result, python, out, env, rows)
     finally:
@@ -199,6 +201,27 @@ def _check_leftovers(result: dict, tag: str, tmp: Path) -> None:
     caches = [p.name for p in tmp.iterdir() if p.name.startswith("rippleb-cache-")]
     if caches:
         result["problems"].append(f"leftovers: {caches} in TMPDIR")
+
+
+def _check_git_lock(result: dict, python: str) -> None:
+    """A run records its checkout's git state as it starts: an interrupt must not leave git's
+    ``index.lock`` behind (the user's next commit would fail). A lock that goes within 2 s
+    belongs to someone's git at work, not to the run."""
+    lock = _git_dir(python) / "index.lock" if _git_dir(python) else None
+    deadline = time.monotonic() + 2.0
+    while lock is not None and lock.exists() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    if lock is not None and lock.exists():
+        result["problems"].append(f"leftovers: {lock}")
+
+
+@functools.lru_cache(maxsize=None)
+def _git_dir(python: str) -> Path | None:
+    """The git directory of the checkout whose rippleb ``python`` imports (None if not one)."""
+    code = "import pathlib, rippleb; print(pathlib.Path(rippleb.__file__).resolve().parent.parent)"
+    root = subprocess.run([python, "-c", code], capture_output=True, text=True).stdout.strip()
+    found = subprocess.run(["git", "-C", root, "rev-parse", "--absolute-git-dir"], capture_output=True, text=True)
+    return Path(found.stdout.strip()) if found.returncode == 0 else None
 
 
 def _check_resume(result: dict, python: str, out: Path, env: dict, rows: int) -> None:

@@ -122,7 +122,7 @@ def git_state(root: Path | None = None) -> dict:
     try:
         commit = _git(checkout, "rev-parse", "HEAD").strip()
         status = _git(checkout, "status", "--porcelain", "--", *CODE_PATHS)
-    except (OSError, subprocess.CalledProcessError):
+    except (OSError, subprocess.CalledProcessError, subprocess.TimeoutExpired):
         built = build_commit() if root is None else None
         if built is None:
             return {"git_commit": "unknown", "git_dirty": "unknown", "git_dirty_paths": []}
@@ -154,8 +154,17 @@ def built_dirty(version: str) -> bool:
 
 
 def _git(root: Path, *args: str) -> str:
-    return subprocess.run(["git", "-C", str(root), *args], check=True, capture_output=True,
-                          text=True, timeout=20).stdout  # not stripped: porcelain lines start with a space
+    """Ask git about the checkout, taking none of its locks.
+
+    ``git status`` otherwise rewrites a stale index under ``.git/index.lock``; a run
+    interrupted meanwhile kills it (``subprocess.run`` ends its child on Ctrl-C) and left
+    that lock behind, so the user's next ``git commit`` failed (found by
+    ``benchmarks/signal_trials.py``). ``GIT_OPTIONAL_LOCKS=0`` is git's switch for such
+    read-only callers.
+    """
+    return subprocess.run(["git", "-C", str(root), *args], check=True, capture_output=True, text=True,
+                          timeout=20, env={**os.environ, "GIT_OPTIONAL_LOCKS": "0"}
+                          ).stdout  # not stripped: porcelain lines start with a space
 
 
 def read_run_provenance(run_dir: Path) -> dict:

@@ -292,23 +292,28 @@ def test_the_salt_never_reaches_a_method_process(tmp_path, monkeypatch, register
 @pytest.mark.parametrize("design", ["simulations-through-the-fork-server", "salt-drawn-before-the-fork"])
 def test_the_seeker_finds_what_a_naive_design_would_leak(tmp_path, monkeypatch, register_methods, design):
     """Why the salt is drawn after the fork server started and the sealed simulations are
-    forked from the runner: either way round, every row finds it (the freed memory of the
-    server's unpickled simulation jobs holds the device seeds; a salt drawn before the
-    fork is in the server's memory, which every row inherits)."""
+    forked from the runner: either way round, a row finds it. A salt drawn before the fork
+    is live in the server's memory, which every row inherits: found every time. The device
+    seeds of simulation jobs sent through the server lie in its *freed* memory, which a later
+    allocation may overwrite before a row forks: found in most runs, not all (CI once missed
+    it in one run), so that design gets up to three runs and must leak in one."""
     from rippleb import scheduler
 
-    if design == "simulations-through-the-fork-server":
-        monkeypatch.setattr(sealing, "draw_salt", lambda: MARK + os.urandom(sealing.SALT_BYTES - len(MARK)))
-        monkeypatch.setattr(scheduler, "_submit_sim", lambda pool, state, sim, job: pool.submit(sim, job, None, None))
-    else:
+    if design == "salt-drawn-before-the-fork":
         early = MARK + os.urandom(sealing.SALT_BYTES - len(MARK))
         monkeypatch.setattr(sealing, "draw_salt", lambda: early)
-    salt, device_seeds, reports = _seek(tmp_path, monkeypatch, register_methods, seeds=1)
-    for found in reports:
-        if design == "simulations-through-the-fork-server":
-            assert {str(s) for s in device_seeds} <= set(found["ints"])
-        else:
-            assert salt.hex() in found["windows"]
+        salt, _, reports = _seek(tmp_path, monkeypatch, register_methods, seeds=1)
+        assert all(salt.hex() in found["windows"] for found in reports)
+        return
+    monkeypatch.setattr(sealing, "draw_salt", lambda: MARK + os.urandom(sealing.SALT_BYTES - len(MARK)))
+    monkeypatch.setattr(scheduler, "_submit_sim", lambda pool, state, sim, job: pool.submit(sim, job, None, None))
+    for attempt in range(3):
+        where = tmp_path / f"attempt{attempt}"
+        where.mkdir()
+        _, device_seeds, reports = _seek(where, monkeypatch, register_methods, seeds=1)
+        if all({str(s) for s in device_seeds} <= set(found["ints"]) for found in reports):
+            return
+    pytest.fail("three runs with simulations through the fork server, and no row found the device seeds")
 
 
 @pytest.mark.slow

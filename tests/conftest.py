@@ -71,6 +71,18 @@ def pytest_report_header(config):
     return None
 
 
+def lock_versions() -> dict[str, str]:
+    """``{package: version}`` pinned by the repository's ``constraints.txt`` (names lower case)."""
+    from pathlib import Path
+
+    lock = {}
+    for line in (Path(__file__).resolve().parent.parent / "constraints.txt").read_text().splitlines():
+        name, sep, version = line.split("#")[0].strip().partition("==")
+        if sep:
+            lock[name.lower()] = version
+    return lock
+
+
 def off_lock() -> list[str]:
     """The packages that compute numbers (``rippleb.provenance.NUMBER_PRODUCERS``) whose
     installed version is not the one in ``constraints.txt``, as ``name X (lock Y)``.
@@ -80,15 +92,10 @@ def off_lock() -> list[str]:
     versions only their last bits may differ, and the exact checks say so and step back.
     """
     from importlib import metadata
-    from pathlib import Path
 
     from rippleb.provenance import NUMBER_PRODUCERS
 
-    lock = {}
-    for line in (Path(__file__).resolve().parent.parent / "constraints.txt").read_text().splitlines():
-        name, sep, version = line.split("#")[0].strip().partition("==")
-        if sep:
-            lock[name.lower()] = version
+    lock = lock_versions()
     off = []
     for name in NUMBER_PRODUCERS:
         try:

@@ -97,8 +97,9 @@ def test_the_published_run_used_the_locked_versions_and_portable_paths():
 
     run = json.loads((RESULTS / "provenance.json").read_text())["run"]
     assert run["machine"]["numerics"] == "portable"
-    lock = dict(line.split("==") for line in (RESULTS.parent / "constraints.txt").read_text().splitlines()
-                if "==" in line and not line.startswith("#"))
+    from conftest import lock_versions
+
+    lock = lock_versions()
     assert {name: run["versions"][name] for name in NUMBER_PRODUCERS} == \
         {name: lock[name] for name in NUMBER_PRODUCERS}
 

@@ -118,7 +118,7 @@ def probe_plugins(registry, timeout: float) -> tuple[dict[str, str], dict[str, s
     while pending or pool.busy:
         while pending and pool.free:
             name = pending.pop(0)
-            pool.submit(name, job(registry.entries[name]), timeout)
+            pool.submit(name, job(registry.entries[name]), timeout, confine=())
         for fin in pool.wait():
             if fin.kind == "done":
                 docs[fin.key] = bytes(fin.value).decode(errors="replace")

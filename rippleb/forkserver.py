@@ -15,7 +15,7 @@ fork) and the modules the runner had imported. It never runs plugin code itself:
 are imported by the workers, as before.
 
 Protocol over a Unix stream socket pair: the runner sends an 8-byte length with the two
-pipe ends attached (``SCM_RIGHTS``), then the pickled ``(job, memory_mb, output)``; the
+pipe ends attached (``SCM_RIGHTS``), then the pickled ``(job, memory_mb, output, confine)``; the
 server answers with the keeper's PID (8 bytes). The server reaps its keepers, exits when
 the runner closes its end, and is killed by the kernel if the runner dies first
 (``PR_SET_PDEATHSIG``).
@@ -86,10 +86,10 @@ class ForkServer:
         theirs.close()
         return cls(ours, pid)
 
-    def spawn(self, job, result_w: int, ctrl_w: int, memory_mb, output) -> int:
+    def spawn(self, job, result_w: int, ctrl_w: int, memory_mb, output, confine=None) -> int:
         """Have the server fork a keeper for ``job`` writing to the given pipe ends;
         returns the keeper's PID (not a child of this process: the server reaps it)."""
-        payload = pickle.dumps((job, memory_mb, output), protocol=pickle.HIGHEST_PROTOCOL)
+        payload = pickle.dumps((job, memory_mb, output, confine), protocol=pickle.HIGHEST_PROTOCOL)
         with self._lock:
             socket.send_fds(self.sock, [_LENGTH.pack(len(payload))], [result_w, ctrl_w])
             self.sock.sendall(payload)
@@ -156,12 +156,12 @@ def _serve(sock: socket.socket, context, preload) -> None:
         request = _receive(sock)
         if request is None:
             break
-        (job, memory_mb, output), (result_w, ctrl_w) = request
+        (job, memory_mb, output, confine), (result_w, ctrl_w) = request
         pid = os.fork()
         if pid == 0:
             sock.close()
             isolation.die_with_parent()  # the server is single-threaded: its death ends the job
-            keeper(functools.partial(job, context), result_w, ctrl_w, memory_mb, output)  # never returns
+            keeper(functools.partial(job, context), result_w, ctrl_w, memory_mb, output, confine)  # never returns
         keepers.add(pid)
         os.close(result_w)
         os.close(ctrl_w)

@@ -28,10 +28,19 @@ import select
 import signal
 import time
 
+CLONE_NEWNS = 0x00020000
 CLONE_NEWUSER = 0x10000000
 CLONE_NEWPID = 0x20000000
 PR_SET_CHILD_SUBREAPER = 36
 PR_SET_PDEATHSIG = 1
+PR_GET_DUMPABLE, PR_SET_DUMPABLE = 3, 4
+# mount(2) flags
+MS_RDONLY, MS_NOSUID, MS_NODEV, MS_NOEXEC = 1, 2, 4, 8
+MS_REMOUNT, MS_NOATIME, MS_NODIRATIME, MS_BIND, MS_REC, MS_PRIVATE = 32, 1024, 2048, 4096, 16384, 1 << 18
+MS_RELATIME = 1 << 21
+#: Where the terminals are: hidden from a method, which could otherwise write to rippleb's
+#: own terminal by opening its pseudo-terminal device (same user, same permissions).
+TERMINALS = "/dev/pts"
 
 
 @functools.cache
@@ -59,26 +68,109 @@ def die_with_parent() -> None:
         _libc().prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
 
 
-def new_pid_namespace() -> bool:
-    """Put this process's *future* children in a new user and PID namespace.
+#: What :func:`new_namespaces` asks for, best first: ``(unshare flags, (pid, mount))``.
+NAMESPACE_CHOICES = ((CLONE_NEWUSER | CLONE_NEWPID | CLONE_NEWNS, (True, True)),
+                     (CLONE_NEWUSER | CLONE_NEWPID, (True, False)))
+
+
+def new_namespaces() -> tuple[bool, bool]:
+    """Put this process's *future* children in a new user and PID namespace, and this
+    process in a new mount namespace (``(pid, mount)``: which of them the kernel granted).
 
     Must be called in a single-threaded process (a freshly forked keeper). The user
     namespace maps the caller's uid and gid onto themselves, so files keep their owner.
-    Returns False (and changes nothing) where the kernel or its policy refuses.
+    The mount namespace lets the worker mount a /proc of its own and cover the run
+    directory (:func:`confine_files`) without touching anyone else's view of the files.
+    Where the kernel or its policy refuses, less is done, and nothing where it refuses all.
     """
-    uid, gid = os.getuid(), os.getgid()
-    try:
-        if _libc().unshare(CLONE_NEWUSER | CLONE_NEWPID) != 0:
-            return False
-    except (OSError, AttributeError):
-        return False
+    ids = os.getuid(), os.getgid()   # read before: inside an unmapped namespace they are 65534
+    for flags, granted in NAMESPACE_CHOICES:
+        try:
+            if _libc().unshare(flags) == 0:
+                _map_ids(*ids)
+                return granted
+        except (OSError, AttributeError):
+            break
+    return False, False
+
+
+def _map_ids(uid: int, gid: int) -> None:
     try:
         _write("/proc/self/setgroups", "deny")
         _write("/proc/self/uid_map", f"{uid} {uid} 1")
         _write("/proc/self/gid_map", f"{gid} {gid} 1")
     except OSError:
         pass  # unmapped ids still work for file access under the caller's credentials
-    return True
+
+
+@contextlib.contextmanager
+def undumpable():
+    """This process not dumpable (:func:`not_dumpable`) within the block, as before after it:
+    a run's jobs, of the same user, can then not open the runner's descriptors (its
+    terminal, its results) nor read its memory (the truths, a sealed run's salt)."""
+    try:
+        was = _libc().prctl(PR_GET_DUMPABLE, 0, 0, 0, 0)
+    except (OSError, AttributeError):
+        was = -1
+    not_dumpable()
+    try:
+        yield
+    finally:
+        if was > 0:
+            with contextlib.suppress(OSError, AttributeError):
+                _libc().prctl(PR_SET_DUMPABLE, was, 0, 0, 0)
+
+
+def not_dumpable() -> None:
+    """Make this process (and what it forks) not dumpable: a process of the same user
+    without ``CAP_SYS_PTRACE`` over it can then neither read its memory nor open its file
+    descriptors through ``/proc/<pid>/fd`` (the keeper's control pipe, the runner's
+    terminal and results). A method's worker never holds that capability over its
+    keeper: its user namespace is the keeper's child."""
+    with contextlib.suppress(OSError, AttributeError):
+        _libc().prctl(PR_SET_DUMPABLE, 0, 0, 0, 0)
+
+
+def confine_files(read_only) -> list[str]:
+    """In a worker that is PID 1 of its own PID and mount namespaces: a /proc of its own
+    namespace (the host's processes, its keeper's and the runner's descriptors out of
+    sight), the terminals hidden (:data:`TERMINALS`), and each existing directory of
+    ``read_only`` (the run directory, the cache) mounted read-only over itself.
+
+    Only this worker's view changes: its mount namespace is private (``MS_PRIVATE``), so
+    nothing propagates back. Files it had opened before keep their access (its output
+    log). Returns what could not be done, one phrase each (empty when all held).
+    """
+    missing = []
+    if _mount(None, "/", None, MS_REC | MS_PRIVATE) != 0:
+        return ["a private mount namespace"]
+    if _mount("proc", "/proc", "proc", MS_NOSUID | MS_NODEV | MS_NOEXEC) != 0:
+        missing.append("a /proc of its own")
+    if os.path.isdir(TERMINALS) and _mount("tmpfs", TERMINALS, "tmpfs", MS_NOSUID | MS_NODEV | MS_NOEXEC,
+                                           "size=4k,mode=0555") != 0:
+        missing.append(f"{TERMINALS} hidden")
+    for path in dict.fromkeys(str(p) for p in read_only):
+        if os.path.isdir(path) and not _read_only(path):
+            missing.append(f"{path} read-only")
+    return missing
+
+
+def _read_only(path: str) -> bool:
+    """Bind ``path`` over itself and make that mount read-only, keeping the flags the
+    kernel locks in a user namespace (nosuid, nodev, noexec, atime) as they were."""
+    if _mount(path, path, None, MS_BIND | MS_REC) != 0:
+        return False
+    kept = os.statvfs(path).f_flag & (MS_NOSUID | MS_NODEV | MS_NOEXEC | MS_NOATIME | MS_NODIRATIME | MS_RELATIME)
+    return _mount(None, path, None, MS_REMOUNT | MS_BIND | MS_RDONLY | kept) == 0
+
+
+def _mount(source, target, fstype, flags: int, data: str | None = None) -> int:
+    def arg(text):
+        return None if text is None else os.fsencode(text)
+    try:
+        return _libc().mount(arg(source), arg(target), arg(fstype), flags, arg(data))
+    except (OSError, AttributeError, ctypes.ArgumentError):
+        return -1
 
 
 def _write(path: str, text: str) -> None:

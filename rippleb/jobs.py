@@ -104,11 +104,13 @@ def truth_from_message(arrays: dict, info: dict) -> Truth:
     return Truth(fs=float(info["fs"]), **{name: arrays.get(name) for name in TRUTH_ARRAYS})
 
 
-def fit_method(method: str, params: dict | None, calibration, out_path, registry) -> bytes:
-    """Fit ``method`` on ``calibration`` and pickle it to ``out_path``.
+def fit_method(method: str, params: dict | None, calibration, registry) -> bytes:
+    """Fit ``method`` on ``calibration`` and pickle it.
 
-    Returns message bytes whose info holds ``status``, ``message``, ``params``,
-    ``fit_s`` and, if the fitted method could be pickled, its artefact ``fitted``.
+    Returns message bytes whose info holds ``status``, ``message``, ``params`` and
+    ``fit_s`` and, if the fitted method could be pickled, whose array ``fitted`` holds the
+    pickle. The runner stores it (:func:`rippleb.cache.store`): a method's worker sees the
+    cache read-only (:func:`rippleb.isolation.confine_files`).
     """
     calibration = load_log(calibration)  # verified before any method code runs
     info = {"status": "ok", "message": "", "params": ""}
@@ -122,8 +124,7 @@ def fit_method(method: str, params: dict | None, calibration, out_path, registry
         blob = pickle.dumps(fitted, protocol=pickle.HIGHEST_PROTOCOL)
     except Exception:  # not picklable (a lambda, a handle): its rows fit it themselves
         return pack({}, info)
-    artefact = store(out_path, blob)
-    return pack({}, {**info, "fitted": {"path": artefact.path, "sha256": artefact.sha256}})
+    return pack({"fitted": np.frombuffer(blob, dtype=np.uint8)}, info)
 
 
 def _fit(cls, params, calibration: SensorLog):

@@ -29,9 +29,12 @@ from rippleb import isolation
 from rippleb.registry import one_line
 
 
-def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output) -> None:
-    """rippleb's own process between the runner and a job: session, namespace, cleanup.
-    Runs ``fn()`` in a worker it forks; never returns."""
+def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output, confine=None) -> None:
+    """rippleb's own process between the runner and a job: session, namespaces, cleanup.
+    Runs ``fn()`` in a worker it forks; never returns.
+
+    ``confine`` is None for rippleb's own jobs (simulations), else the directories a
+    method's worker must not write (:func:`rippleb.isolation.confine_files`)."""
     try:
         # First: Ctrl-C reaches the runner's whole process group, and what is inherited
         # from the runner until here is its handler (the runner decides what a signal ends).
@@ -40,7 +43,8 @@ def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output) -> None:
         _keep_inherited_pages_shared()
         os.setsid()
         isolation.close_fds_except(result_w, ctrl_w)
-        isolated = isolation.new_pid_namespace()
+        isolation.not_dumpable()   # its descriptors (the control pipe) out of the worker's reach
+        isolated, own_mounts = isolation.new_namespaces()
         isolation.become_subreaper()
         worker = os.fork()
         if worker == 0:
@@ -49,7 +53,8 @@ def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output) -> None:
             # must not reach the keeper, whose death would lose the row it reports.
             os.setpgid(0, 0)
             os.close(ctrl_w)
-            _worker(fn, result_w, memory_mb, output)  # never returns
+            _worker(fn, result_w, memory_mb, output, confine if isolated and own_mounts else None,
+                    confine is not None)  # never returns
         os.close(result_w)
         _write_all(ctrl_w, f"{worker} {int(isolated)}\n".encode())
         status = _wait_worker(worker, ctrl_w)
@@ -90,13 +95,15 @@ def _wait_worker(worker: int, ctrl_w: int) -> int:
         os.close(pidfd)
 
 
-def _worker(fn, result_w: int, memory_mb, output) -> None:
+def _worker(fn, result_w: int, memory_mb, output, confine, untrusted: bool) -> None:
     message = b"R" + b"worker did not start"
     try:
         _keep_inherited_pages_shared()
         isolation.die_with_parent()
         isolation.close_fds_except(result_w)
         _redirect_output(output)
+        if untrusted:
+            _confine(confine)
         _limit_memory(memory_mb)
         try:
             payload = fn()
@@ -111,6 +118,15 @@ def _worker(fn, result_w: int, memory_mb, output) -> None:
     finally:
         # Skip the parent's atexit handlers and buffered files (pytest, tqdm) in the child.
         os._exit(0)
+
+
+def _confine(read_only) -> None:
+    """Close what the kernel lets a method's worker close off (docs/robustness.md); say on
+    its own log what it could not, so a reader of the row's log knows the run was open."""
+    missing = ["a mount namespace"] if read_only is None else isolation.confine_files(read_only)
+    if missing:
+        print(f"rippleb: this worker is not confined: no {', no '.join(missing)} (the kernel refused)",
+              file=sys.stderr)
 
 
 def _keep_inherited_pages_shared() -> None:

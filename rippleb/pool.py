@@ -31,6 +31,7 @@ import atexit
 import contextlib
 import functools
 import os
+import re
 import select
 import signal
 import sys
@@ -48,7 +49,8 @@ DEFAULT_MAX_BYTES = 2**30
 @dataclass
 class Finished:
     """How a job ended: ``kind`` is ``done`` (``value`` holds its bytes), ``raised``
-    (``value`` is the one-line error), ``timeout``, ``oversized`` or ``died`` (``value``
+    (``value`` is the one-line error), ``timeout``, ``oversized``, ``garbled`` (its control
+    pipe held bytes no keeper writes; ``value``: the first of them) or ``died`` (``value``
     the worker's exit code, negative for a signal)."""
 
     key: object
@@ -67,24 +69,52 @@ class _Running:
     deadline: float | None
     max_bytes: int
     direct: bool = True    # the keeper is our child (else the fork server's)
+    keeper_session: int = 0  # the keeper's PID, kept: it starts a session of that number
     result: bytearray = field(default_factory=bytearray)
     ctrl: bytearray = field(default_factory=bytearray)
     result_eof: bool = False
     ctrl_eof: bool = False
 
     @property
-    def ctrl_lines(self) -> list[str]:
-        return bytes(self.ctrl).decode(errors="replace").splitlines()
+    def garbled(self) -> bool:
+        """The control pipe holds what its keeper cannot have written: not its two lines
+        (:func:`control`), or an exit code while the worker it names still runs (the keeper
+        reaps its worker before it reports)."""
+        parsed = control(bytes(self.ctrl))
+        return parsed is None or (parsed[1] is not None and self.worker is not None)
 
     @property
     def worker(self) -> int | None:
-        lines = self.ctrl_lines
-        return int(lines[0].split()[0]) if lines else None
+        """The worker's PID as its keeper named it, once named, if it is in the keeper's
+        session (so a forged PID never makes the runner kill another process)."""
+        parsed = control(bytes(self.ctrl))
+        if parsed is None or parsed[0] is None:
+            return None
+        try:
+            return parsed[0] if os.getsid(parsed[0]) == self.keeper_session else None
+        except OSError:
+            return None
 
     @property
     def exit_code(self) -> int | None:
-        lines = self.ctrl_lines
-        return int(lines[1]) if len(lines) > 1 and bytes(self.ctrl).endswith(b"\n") else None
+        parsed = control(bytes(self.ctrl))
+        return None if parsed is None else parsed[1]
+
+
+#: The keeper's two lines, ``"<worker PID> <0|1>\n"`` and ``"<exit code>\n"``, complete or
+#: cut short by a read (a prefix of them); nothing else.
+_CONTROL = re.compile(rb"(?:(\d{1,10}) [01]\n(?:(-?\d{1,4})\n|-?\d{0,4})|\d{0,10}(?: [01]?)?)")
+
+
+def control(data: bytes) -> tuple[int | None, int | None] | None:
+    """``(worker PID, exit code)`` from the bytes of a control pipe (None where not yet
+    sent), or None when they are not what a keeper writes: a process of the job wrote
+    into the pipe (docs/robustness.md). Parsed strictly, so no byte there can raise."""
+    match = _CONTROL.fullmatch(data)
+    if match is None:
+        return None
+    worker, code = match.groups()
+    return (int(worker) if worker else None), (int(code) if code else None)
 
 
 class Pool:
@@ -121,9 +151,12 @@ class Pool:
         return bool(self._running)
 
     def submit(self, key, fn, timeout: float | None = None, output: str | None = None,
-               max_bytes: int | None = None) -> None:
+               max_bytes: int | None = None, confine=None) -> None:
         """Start ``fn`` (see ``context``) in an isolated worker; its stdout and stderr go to
-        the file ``output`` (or /dev/null), so a chatty plugin cannot garble the CLI's output."""
+        the file ``output`` (or /dev/null), so a chatty plugin cannot garble the CLI's output.
+
+        ``confine``: None for rippleb's own jobs; for a method's, the directories its worker
+        sees read-only (:func:`rippleb.isolation.confine_files`; ``()`` for none)."""
         # Held: a keeper started but not yet tracked would be orphaned with its pipes open.
         with interrupts.held():
             reap_exiting()
@@ -131,7 +164,7 @@ class Pool:
             ctrl_r, ctrl_w = os.pipe()
             pid = None
             try:
-                pid = self._start_keeper(fn, result_w, ctrl_w, output)
+                pid = self._start_keeper(fn, result_w, ctrl_w, output, confine)
             finally:  # the keeper holds the write ends now (or no keeper started)
                 os.close(result_w)
                 os.close(ctrl_w)
@@ -142,17 +175,18 @@ class Pool:
                 os.set_blocking(fd, False)
             now = time.monotonic()
             self._running.append(_Running(key, pid, result_r, ctrl_r, now, now + timeout if timeout else None,
-                                          max_bytes or DEFAULT_MAX_BYTES, direct=self.server is None))
+                                          max_bytes or DEFAULT_MAX_BYTES, direct=self.server is None,
+                                          keeper_session=pid))
 
-    def _start_keeper(self, fn, result_w: int, ctrl_w: int, output) -> int:
+    def _start_keeper(self, fn, result_w: int, ctrl_w: int, output, confine) -> int:
         if self.server is not None:
-            return self.server.spawn(fn, result_w, ctrl_w, self.memory_mb, output)
+            return self.server.spawn(fn, result_w, ctrl_w, self.memory_mb, output, confine)
         bound = fn if self.context is None else functools.partial(fn, self.context)
         sys.stdout.flush()
         sys.stderr.flush()
         pid = os.fork()
         if pid == 0:
-            keeper(bound, result_w, ctrl_w, self.memory_mb, output)  # never returns
+            keeper(bound, result_w, ctrl_w, self.memory_mb, output, confine)  # never returns
         return pid
 
     def wait(self) -> list[Finished]:
@@ -192,6 +226,8 @@ class Pool:
             result = None
             if len(run.result) > run.max_bytes:
                 result = Finished(run.key, "oversized", len(run.result), now - run.started)
+            elif run.garbled:
+                result = Finished(run.key, "garbled", bytes(run.ctrl[:40]), now - run.started)
             elif run.exit_code is not None or run.ctrl_eof:
                 _end(run, _EXITING)  # the worker is gone: drain its pipe to the end
                 result = _outcome(run, now)

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rippleb import interrupts
+from rippleb import interrupts, isolation
 from rippleb import jobs as job_fns
 from rippleb import numerics, sealing
 from rippleb.cache import digest, log_bytes
@@ -271,7 +271,7 @@ def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, pro
     # Signals are held from here on and raised only where stopping leaves nothing half
     # done (rippleb.interrupts): the loops between jobs and the waits, which poll. So an
     # interrupt never orphans a job, a half-claimed run directory or a temporary file.
-    with interrupts.handling(), interrupts.held():
+    with interrupts.handling(), interrupts.held(), isolation.undumpable():
         if executor is not None and hasattr(executor, "check"):
             with interrupts.raising():  # a bad address is bad input: refused before the directory is claimed
                 executor.check()
@@ -285,7 +285,6 @@ def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, pro
             with server:
                 # After the fork: the server, and every row it forks, never holds the salt.
                 seal = sealing.open_seal(out, resume, config, sealed=sealed, salt_file=salt_file)
-                sealing.protect(seal)
                 with run_dir(out, resume, config, on_start) as out_dir:
                     started = out_dir is not None
                     interrupts.check_interrupted()

@@ -161,7 +161,8 @@ def _start_next(pool: Pool, state: State, bar) -> bool:
         fit = Fit(key.method, cal_case)
         if state.fits[fit] == "pending":
             state.fits[fit] = "running"
-            pool.submit(fit, _fit_job(fit, state), state.timeout, _output(state, f"fit--{key.method}--{key.seed}"))
+            pool.submit(fit, _fit_job(fit, state), state.timeout, _output(state, f"fit--{key.method}--{key.seed}"),
+                        confine=_confined(state))
             return True
         if state.fits[fit] == "running":
             continue
@@ -177,7 +178,7 @@ def _start_next(pool: Pool, state: State, bar) -> bool:
         n_samples, _ = state.lengths[case]
         pool.submit(key, _row_job(key, state, state.fits[fit], evaluation), state.timeout,
                     _output(state, f"{key.method}--{key.scenario}--{key.condition}--{key.seed}"),
-                    max_bytes=24 * n_samples + 2**20)
+                    max_bytes=24 * n_samples + 2**20, confine=_confined(state))
         return True
     for sim, st in state.sims.items():
         if st == "pending":
@@ -187,6 +188,12 @@ def _start_next(pool: Pool, state: State, bar) -> bool:
             _submit_sim(pool, state, sim, _sim_job(scenario, sim, paths, state.seal))
             return True
     return False
+
+
+def _confined(state: State) -> tuple[str, ...]:
+    """What a method's worker sees read-only: the run directory and the cache."""
+    run_dir = state.results.path.parent if state.results.path is not None else None
+    return tuple(str(p) for p in (run_dir, state.cache) if p is not None)
 
 
 def _output(state: State, stem: str) -> str | None:
@@ -243,15 +250,18 @@ def _unphysical(state: State, case: Case, cal_case: Case) -> str | None:
 
 
 def _fit_job(fit: Fit, state: State) -> job_fns.Job:
-    calibration = state.artefacts[fit.calibration]
-    path = state.cache / f"fit-{digest(repr(fit).encode())[:32]}.pkl"
-    return job_fns.Job("fit", (fit.method, None, calibration, path))
+    return job_fns.Job("fit", (fit.method, None, state.artefacts[fit.calibration]))
 
 
 def _fit_outcome(fin, state: State) -> dict:
     if fin.kind == "done":
         try:
-            return unpack(fin.value)[1]
+            arrays, info = unpack(fin.value)
+            if "fitted" in arrays:  # stored here: the fit's worker cannot write the cache
+                path = state.cache / f"fit-{digest(repr(fin.key).encode())[:32]}.pkl"
+                artefact = store(path, arrays["fitted"].tobytes())
+                info["fitted"] = {"path": artefact.path, "sha256": artefact.sha256}
+            return info
         except Exception as exc:  # noqa: BLE001 - whatever a fit sends, it is one status line
             return {"status": "error", "message": f"fit sent an unreadable result ({type(exc).__name__})"}
     if fin.kind == "timeout":
@@ -365,9 +375,15 @@ def _why(fin, state: State) -> str:
         return f"killed after {state.timeout:g} s"
     if fin.kind == "oversized":
         return f"sent {fin.value} bytes, more than a row's result can hold"
+    if fin.kind == "garbled":
+        return (f"its process wrote into rippleb's control pipe ({bytes(fin.value)!r}...); "
+                "the job was ended and its result discarded")
     code = fin.value
     if code is not None and code < 0:
-        name = signal.Signals(-code).name
+        try:
+            name = signal.Signals(-code).name
+        except ValueError:
+            name = f"number {-code}"
         if -code == signal.SIGKILL:  # not our timeout: the OOM killer or a user
             return f"{ENVIRONMENT}process killed by {name} (out of memory, or killed from outside)"
         return f"process killed by signal {name} (a crash?)"

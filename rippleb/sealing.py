@@ -17,9 +17,10 @@ Where the salt lives (docs/robustness.md, "Sealed runs"):
 * only simulation jobs use it, and those are forked from the runner directly, never sent
   through the fork server (whose freed memory every later row would inherit); they run
   rippleb's code only, and the visible logs they write name the public seed;
-* while it is in memory the runner is not dumpable (``PR_SET_DUMPABLE``), so where the
-  kernel refuses PID namespaces a row of the same user cannot read it (or the truths)
-  through ``/proc/<runner>/mem`` either;
+* while it is in memory the runner is not dumpable (``PR_SET_DUMPABLE``, for the whole
+  of every run: :func:`rippleb.isolation.undumpable`), so where the kernel refuses PID
+  namespaces a row of the same user cannot read it (or the truths) through
+  ``/proc/<runner>/mem`` either;
 * ``run.json`` records only its commitment (``sha256:`` + SHA-256 of the 32 salt bytes);
   the salt itself is written to the file the user named (``--sealed FILE``) when the
   run ends, after every job process has ended. No file holds it while methods run.
@@ -32,7 +33,6 @@ checks it against the commitment. The command-line options are added here, not i
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import hashlib
 import hmac
 import os
@@ -47,7 +47,6 @@ SALT_BYTES = 32
 #: The result column that marks the rows of a sealed run (absent from unsealed runs).
 SEALED_COLUMN = "sealed"
 _DOMAIN = b"rippleb sealed device seed v1:"
-_PR_GET_DUMPABLE, _PR_SET_DUMPABLE = 3, 4
 _COMMITMENT = re.compile(r"sha256:[0-9a-f]{64}")
 
 
@@ -66,7 +65,6 @@ class Seal:
         self._salt = bytearray(salt)   # a bytearray can be wiped when the run ends
         self.save_to = save_to
         self.commitment = commitment(salt)
-        self.was_dumpable: bool | None = None   # set by protect()
 
     def device_seed(self, seed: int) -> int:
         """The seed a sealed run simulates for the public ``seed``: 256 bits of
@@ -191,37 +189,15 @@ def _name(path) -> str:
 # ----------------------------------------------------------------------------- during and after
 
 
-def protect(seal: Seal | None) -> None:
-    """While a salt is held, this process is not dumpable: no process of the same user
-    without CAP_SYS_PTRACE may read its memory (the salt, the truths) through /proc or
-    ptrace. Nothing changes for an unsealed run."""
-    if seal is not None:
-        seal.was_dumpable = _dumpable()
-        _set_dumpable(False)
-
-
 def release(seal: Seal | None, run_started: bool) -> None:
     """After every job of the run has ended: write a new run's salt to its file, wipe it
-    here, and make this process dumpable again."""
+    here."""
     if seal is None:
         return
     try:
         save_salt(seal, run_started)
     finally:
         seal.wipe()
-        if getattr(seal, "was_dumpable", None) is not None:
-            _set_dumpable(seal.was_dumpable)
-
-
-def _dumpable() -> bool | None:
-    with contextlib.suppress(OSError, AttributeError, TypeError):
-        return bool(ctypes.CDLL(None, use_errno=True).prctl(_PR_GET_DUMPABLE, 0, 0, 0, 0))
-    return None
-
-
-def _set_dumpable(on: bool) -> None:
-    with contextlib.suppress(OSError, AttributeError, TypeError):
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_DUMPABLE, int(on), 0, 0, 0)
 
 
 def save_salt(seal: Seal | None, run_started: bool) -> None:

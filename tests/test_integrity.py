@@ -238,15 +238,41 @@ def test_hostile_plugins_cannot_peek_escape_or_kill(site, tmp_path):
     assert not list(tmp_path.glob("rippleb-cache-*"))        # the cache went with the run
 
 
-def test_a_plugin_that_rewrites_the_cache_fails_the_rows_it_tampered(site, tmp_path):
-    # One job at a time, rows in key order: the forger's fit rewrites every cached log
-    # before the other rows read theirs.
+def test_a_plugin_cannot_rewrite_the_cache(site, tmp_path):
+    """One job at a time, rows in key order: the forger's fit tries to rewrite every cached
+    log before the other rows read theirs; its worker sees the cache read-only."""
+    clean = _run(site, tmp_path, tmp_path / "clean", "lowpass,raw", jobs="1")
+    assert clean.returncode == 0, clean.stderr
     proc = _run(site, tmp_path, tmp_path / "forged", "forger,lowpass,raw", jobs="1")
     assert proc.returncode == 0, proc.stderr
     rows = pd.read_csv(tmp_path / "forged" / "results.csv").set_index("method")
+    reference = pd.read_csv(tmp_path / "clean" / "results.csv").set_index("method")
     for method in ("lowpass", "raw"):
-        assert rows.loc[method, "status"] == "error"
-        assert "SHA-256 mismatch" in rows.loc[method, "message"]
+        assert rows.loc[method, "status"] == "ok", rows.loc[method, "message"]
+        assert rows.loc[method, "rms_error_nm"] == reference.loc[method, "rms_error_nm"]
+
+
+def test_where_the_cache_is_writable_a_rewrite_fails_the_rows_it_tampered(tmp_path, monkeypatch,
+                                                                            register_methods):
+    """Without a mount namespace (a kernel that refuses it) the worker can write the cache;
+    the SHA-256 of every cached file, taken before any method ran, still catches it."""
+    from rippleb import isolation
+
+    namespace = {}
+    exec(HOSTILE, namespace)
+    monkeypatch.setattr(isolation, "NAMESPACE_CHOICES", isolation.NAMESPACE_CHOICES[1:])  # no mount namespace
+    (tmp_path / "tmp").mkdir()
+    monkeypatch.setenv("TMPDIR", str(tmp_path / "tmp"))   # the forger rewrites this run's cache only
+    monkeypatch.setattr("tempfile.tempdir", None)
+    monkeypatch.chdir(tmp_path)
+    register_methods(namespace["Forger"])
+    import rippleb
+
+    frame = rippleb.run(methods="forger,lowpass,raw", scenarios="static-contact", seeds=1, jobs=1,
+                        out=tmp_path / "forged", progress=False).set_index("method")
+    for method in ("lowpass", "raw"):
+        assert frame.loc[method, "status"] == "error"
+        assert "SHA-256 mismatch" in frame.loc[method, "message"]
 
 
 def test_a_plugin_that_hangs_or_exits_at_import_delays_only_itself(site, tmp_path):
@@ -328,7 +354,7 @@ def test_no_process_outlives_its_row(tmp_path, monkeypatch, namespaces, register
     monkeypatch.syspath_prepend(str(tmp_path))
     cls = importlib.import_module("spawns_mod").Spawns
     if not namespaces:
-        monkeypatch.setattr(isolation, "new_pid_namespace", lambda: False)
+        monkeypatch.setattr(isolation, "new_namespaces", lambda: (False, False))
     register_methods(cls)
     frame = rippleb.run(methods="spawns", scenarios="static-contact", seeds=1)
     assert list(frame.status) == ["ok"], frame.message.tolist()
@@ -364,7 +390,7 @@ def test_a_job_that_signals_its_group_cannot_kill_its_keeper(monkeypatch, namesp
     from rippleb.pool import Pool
 
     if not namespaces:
-        monkeypatch.setattr(isolation, "new_pid_namespace", lambda: False)
+        monkeypatch.setattr(isolation, "new_namespaces", lambda: (False, False))
     job = _signals_its_group_and_parent if namespaces else _signals_its_group
     expected = ("done", b"reported") if namespaces else ("died", -signal.SIGTERM)
     outcomes = []

@@ -1,0 +1,221 @@
+"""A method's process cannot reach the runner's plumbing (issue 25, item 2).
+
+``Prober`` tries, from its ``reset``, everything the issue found open: the processes it
+can see in ``/proc``, every file descriptor of theirs it can open for writing (the
+keeper's control pipe, the runner's terminal and results), the terminals in ``/dev/pts``,
+files in the run directory and the cache, and forged summary lines on its own output. It
+writes what it achieved to ``PROBE_OUT`` (outside the run directory). Through the real CLI
+the worker is confined (a /proc of its own, terminals hidden, run directory and cache
+read-only); where the kernel refuses a mount namespace, the keeper and the runner are
+still not dumpable, so their descriptors stay closed to it.
+"""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import pandas as pd
+import pytest
+
+import rippleb
+from test_bad_input import _dist  # a minimal installed distribution without pip
+
+pytestmark = pytest.mark.slow
+
+PROBER = textwrap.dedent('''
+    import glob, json, os, sys
+    import numpy as np
+    from rippleb import Method
+
+    FORGED = "12 rows (12 ok) in forged/results.csv"
+
+    def _ancestors(pid):
+        chain = []
+        while pid > 1 and len(chain) < 64:
+            try:
+                with open(f"/proc/{pid}/stat") as fh:
+                    pid = int(fh.read().rsplit(")", 1)[1].split()[1])
+            except (OSError, ValueError):
+                break
+            chain.append(pid)
+        return chain
+
+    def _try_write(path):
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+        except OSError as exc:
+            return type(exc).__name__
+        os.close(fd)
+        return "opened"
+
+    def probe():
+        runner = int(os.environ["PROBE_RUNNER"])
+        me = int(os.readlink("/proc/self"))   # its PID as this /proc counts (os.getpid() is 1)
+        found = {"visible": sorted(int(p) for p in os.listdir("/proc") if p.isdigit()), "opened": []}
+        for pid in found["visible"]:
+            if pid == me:
+                continue
+            try:
+                fds = os.listdir(f"/proc/{pid}/fd")
+            except OSError:
+                continue
+            for fd in fds:
+                try:
+                    target = os.readlink(f"/proc/{pid}/fd/{fd}")
+                except OSError:
+                    target = "?"
+                if _try_write(f"/proc/{pid}/fd/{fd}") == "opened":
+                    rippleb_process = pid == runner or runner in _ancestors(pid)
+                    found["opened"].append([pid, fd, target, rippleb_process])
+        found["terminals"] = {p: _try_write(p) for p in glob.glob("/dev/pts/[0-9]*")}
+        run_dir = os.environ["PROBE_RUN_DIR"]
+        found["run_dir"] = {name: _try_write(os.path.join(run_dir, name)) for name in ("forged.txt", "results.csv")}
+        caches = glob.glob(os.path.join(os.environ.get("TMPDIR", "/tmp"), "rippleb-cache-*"))
+        found["cache"] = {c: _try_write(os.path.join(c, "forged.npz")) for c in caches}
+        print(FORGED)
+        print(FORGED, file=sys.stderr)
+        with open(os.environ["PROBE_OUT"] + "." + os.urandom(4).hex(), "w") as fh:
+            json.dump(found, fh)
+
+    class Prober(Method):
+        """Probes the runner's plumbing, then returns zeros."""
+        name = "prober"
+        def reset(self, spec):
+            probe()
+        def step(self, block):
+            return np.zeros(len(block))
+''')
+
+
+def _reports(tmp_path):
+    return [json.loads(p.read_text()) for p in tmp_path.glob("found.*")]
+
+
+def _assert_nothing_reached(found, run_dir):
+    rippleb_fds = [entry for entry in found["opened"] if entry[3]]
+    assert rippleb_fds == [], rippleb_fds            # no descriptor of the runner, server or keeper
+    assert all(v != "opened" for v in found["run_dir"].values()), found["run_dir"]
+    assert all(v != "opened" for v in found["cache"].values()), found["cache"]
+    assert not (run_dir / "forged.txt").exists()
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory):
+    site = tmp_path_factory.mktemp("prober-site")
+    _dist(site, "rippleb-prober", "rippleb_prober", PROBER, {"prober": "Prober"})
+    return site
+
+
+def test_a_confined_worker_sees_nothing_of_the_run(site, tmp_path):
+    """Through the CLI: the worker's /proc holds itself only, no terminal, the run directory
+    and the cache read-only; its forged summary lines end in its own log."""
+    run_dir = tmp_path / "run"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]),
+           "TMPDIR": str(tmp_path), "PROBE_OUT": str(tmp_path / "found"), "PROBE_RUN_DIR": str(run_dir),
+           "PROBE_RUNNER": "0"}
+    proc = subprocess.Popen([sys.executable, "-m", "rippleb", "run", "--methods", "prober,raw", "--scenarios",
+                             "static-contact", "--seeds", "1", "--jobs", "2", "--no-progress", "--out", str(run_dir)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    (found,) = _reports(tmp_path)
+    assert found["visible"] == [1], found["visible"]   # PID 1 of its namespace, alone
+    assert found["opened"] == []
+    assert found["terminals"] == {}
+    _assert_nothing_reached(found, run_dir)
+    assert "12 rows (12 ok)" not in out + err
+    assert "2 rows (2 ok)" in out + err
+    rows = pd.read_csv(run_dir / "results.csv")
+    assert sorted(rows.method) == ["prober", "raw"] and (rows.status == "ok").all()
+    assert "12 rows (12 ok)" in (run_dir / "logs" / "prober--static-contact--same-session--0.txt").read_text()
+
+
+def test_without_a_mount_namespace_the_plumbing_stays_closed(tmp_path, monkeypatch, register_methods):
+    """A kernel that refuses the mount namespace: the worker sees the host's processes, but
+    every rippleb process (runner, fork server, keepers) is not dumpable, so none of their
+    descriptors opens; the run directory is still only rippleb's to write, by its rows."""
+    from rippleb import isolation
+
+    namespace = {}
+    exec(PROBER, namespace)
+    monkeypatch.setattr(isolation, "NAMESPACE_CHOICES", isolation.NAMESPACE_CHOICES[1:])  # no mount namespace
+    run_dir = tmp_path / "run"
+    for name, value in {"PROBE_OUT": tmp_path / "found", "PROBE_RUN_DIR": run_dir, "PROBE_RUNNER": os.getpid(),
+                        "TMPDIR": tmp_path}.items():
+        monkeypatch.setenv(name, str(value))
+    monkeypatch.setattr("tempfile.tempdir", None)
+    register_methods(namespace["Prober"])
+    frame = rippleb.run(methods="prober,raw", scenarios="static-contact", seeds=1, jobs=2, out=run_dir,
+                        progress=False)
+    assert (frame.status == "ok").all(), frame.message.tolist()
+    (found,) = _reports(tmp_path)
+    assert len(found["visible"]) > 1                   # the host's /proc: this is the weaker case
+    rippleb_fds = [entry for entry in found["opened"] if entry[3]]
+    assert rippleb_fds == [], rippleb_fds
+
+
+# ----------------------------------------------------------------------------- the control pipe
+
+
+def _write_into_keeper(garbage: bytes) -> bytes:
+    """A job that writes ``garbage`` into every pipe its keeper holds (the control pipe among
+    them), which only a worker with CAP_SYS_PTRACE over its keeper can: root without a user
+    namespace. Returns whether it could."""
+    keeper = os.getppid()
+    wrote = 0
+    for fd in os.listdir(f"/proc/{keeper}/fd"):
+        try:
+            if os.readlink(f"/proc/{keeper}/fd/{fd}").startswith("pipe:"):
+                with open(f"/proc/{keeper}/fd/{fd}", "wb", buffering=0) as fh:
+                    fh.write(garbage)
+                wrote += 1
+        except OSError:
+            pass
+    return b"wrote %d" % wrote
+
+
+@pytest.mark.parametrize("garbage", [b"not a pid\n", b"4242 1\n0\n", b"1 1\n" * 3])
+def test_garbage_in_the_control_pipe_ends_that_job_only(monkeypatch, garbage):
+    """Where the worker can reach its keeper's pipes (no namespaces, running as root: the
+    issue's attack, which crashed the run or defeated --timeout), what it writes ends its
+    own job as ``garbled``, never the pool; a plain job beside it is done."""
+    import functools
+
+    from rippleb import isolation
+    from rippleb.pool import Pool
+
+    monkeypatch.setattr(isolation, "NAMESPACE_CHOICES", ())   # the kernel refuses namespaces
+    pool = Pool(2)
+    pool.submit("attacker", functools.partial(_write_into_keeper, garbage), timeout=30, confine=())
+    pool.submit("plain", lambda: b"fine", timeout=30)
+    finished = {}
+    while pool.busy:
+        finished.update({f.key: f for f in pool.wait()})
+    assert finished["plain"].kind == "done" and finished["plain"].value == b"fine"
+    if os.geteuid() == 0:
+        assert finished["attacker"].kind == "garbled", finished["attacker"]
+    else:   # the keeper is not dumpable: an unprivileged worker cannot open its pipes
+        assert finished["attacker"] == finished["attacker"].__class__("attacker", "done", b"wrote 0",
+                                                                      finished["attacker"].wall_s)
+
+
+def test_the_control_parser_never_raises_and_reads_only_what_a_keeper_writes():
+    from hypothesis import given
+    from hypothesis import strategies as st
+
+    from rippleb.pool import control
+
+    @given(st.binary(max_size=40))
+    def anything(data):
+        parsed = control(data)
+        assert parsed is None or all(v is None or isinstance(v, int) for v in parsed)
+
+    anything()
+    assert control(b"") == (None, None)
+    assert control(b"123 1") == (None, None)            # cut short by a read
+    assert control(b"123 1\n") == (123, None)
+    assert control(b"123 0\n-9\n") == (123, -9)
+    for forged in (b"x", b"123 1\n0\n0\n", b"123 1\nexit 0\n", b"123 2\n", b"123 1\n12345\n"):
+        assert control(forged) is None, forged

@@ -21,3 +21,7 @@ class EnvironmentLost(RipplebError):
     run can be finished with ``--resume`` (the CLI adds what was kept and the command)."""
 
     resumable = True
+
+
+class RunWarning(UserWarning):
+    """Something a run or a reader repaired or will do again, said in one line."""

@@ -131,11 +131,12 @@ def not_dumpable() -> None:
         _libc().prctl(PR_SET_DUMPABLE, 0, 0, 0, 0)
 
 
-def confine_files(read_only) -> list[str]:
+def confine_files(read_only, hidden_files=()) -> list[str]:
     """In a worker that is PID 1 of its own PID and mount namespaces: a /proc of its own
     namespace (the host's processes, its keeper's and the runner's descriptors out of
-    sight), the terminals hidden (:data:`TERMINALS`), and each existing directory of
-    ``read_only`` (the run directory, the cache) mounted read-only over itself.
+    sight), the terminals hidden (:data:`TERMINALS`), each existing directory of
+    ``read_only`` (the run directory, the cache) mounted read-only over itself, and each
+    existing file of ``hidden_files`` (rippleb's key) covered by ``/dev/null``.
 
     Only this worker's view changes: its mount namespace is private (``MS_PRIVATE``), so
     nothing propagates back. Files it had opened before keep their access (its output
@@ -152,6 +153,9 @@ def confine_files(read_only) -> list[str]:
     for path in dict.fromkeys(str(p) for p in read_only):
         if os.path.isdir(path) and not _read_only(path):
             missing.append(f"{path} read-only")
+    for path in map(str, hidden_files):
+        if os.path.isfile(path) and _mount(os.devnull, path, None, MS_BIND) != 0:
+            missing.append(f"{path} hidden")
     return missing
 
 

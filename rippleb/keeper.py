@@ -25,7 +25,7 @@ import signal
 import sys
 import traceback
 
-from rippleb import isolation
+from rippleb import integrity, isolation
 from rippleb.registry import one_line
 
 
@@ -123,7 +123,8 @@ def _worker(fn, result_w: int, memory_mb, output, confine, untrusted: bool) -> N
 def _confine(read_only) -> None:
     """Close what the kernel lets a method's worker close off (docs/robustness.md); say on
     its own log what it could not, so a reader of the row's log knows the run was open."""
-    missing = ["a mount namespace"] if read_only is None else isolation.confine_files(read_only)
+    missing = (["a mount namespace"] if read_only is None
+               else isolation.confine_files(read_only, hidden_files=[integrity.key_path()]))
     if missing:
         print(f"rippleb: this worker is not confined: no {', no '.join(missing)} (the kernel refused)",
               file=sys.stderr)

@@ -15,7 +15,6 @@ used by earlier versions of this module are re-exported here.
 from __future__ import annotations
 
 import json
-import shutil
 import warnings
 from pathlib import Path
 
@@ -27,7 +26,7 @@ from rippleb.provenance import (collect_provenance, environment_sentence, enviro
                                 provenance_markdown,  # noqa: F401
                                 read_run_provenance, seeds_text)
 from rippleb.metrics import METRIC_COLUMNS
-from rippleb.results import RunWarning, swept_columns
+from rippleb.results import RunWarning, copy_rows, row_key, swept_columns
 from rippleb.sealing import sealed_text
 from rippleb.verdicts import method_verdicts
 from rippleb.stats import (CONFIDENCE, METHOD_ORDER, fmt_interval, interval_frame,  # noqa: F401
@@ -42,6 +41,7 @@ from rippleb.tables import (ACCURACY_COLUMNS, MATRIX_COLUMNS, by_condition,  # n
 
 def load_rows(run_dir):
     """The rows of ``run_dir/results.csv`` as a DataFrame; one-line error if there are none."""
+    from rippleb.integrity import verified_rows
     from rippleb.results import ResultsFile, read_rows
 
     run_dir = Path(run_dir)
@@ -49,7 +49,7 @@ def load_rows(run_dir):
     if not path.is_file():
         raise InputError(f"{run_dir}: no results.csv (is this a rippleb run directory?)")
     results = ResultsFile(None)
-    results.rows = read_rows(path)
+    results.rows = verified_rows(run_dir, read_rows(path), path)
     frame = results.frame()
     if frame.empty:
         raise InputError(f"{path}: no rows to report")
@@ -318,9 +318,10 @@ def _write_report(run_dir: Path, out: Path, frame, *, figures, figure_seed, argv
         warnings += figure_warnings
     prov["figure_seed"] = figure_seed if figures else None
     # A byte copy, not a rewrite: re-printing parsed floats could change their last digit,
-    # and tests/test_published.py compares them exactly.
+    # and tests/test_published.py compares them exactly. Only of the rows reported: those
+    # a reader dropped (not rippleb's, or cut short) stay out of the copy too.
     with atomic_path(out / "results.csv") as tmp:
-        shutil.copyfile(run_dir / "results.csv", tmp)
+        copy_rows(run_dir / "results.csv", tmp, {row_key(r) for r in frame.to_dict("records")})
     _write(out / "provenance.json", json.dumps(prov, indent=1, default=str) + "\n")
     _write(out / "README.md", readme_markdown(frame, prov, drawn, published=published, run_dir=str(run_dir)))
     page = None

@@ -26,7 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from rippleb.simulator.conditions import DEFAULT_CONDITION
-from rippleb.errors import InputError
+from rippleb import integrity
+from rippleb.errors import InputError, RunWarning  # noqa: F401 - RunWarning: re-exported
 from rippleb.files import atomic_path
 from rippleb.metrics import METRIC_COLUMNS
 
@@ -42,10 +43,6 @@ ENVIRONMENT = "environment: "
 REWRITE_INTERVAL_S = 2.0
 #: ... and at most once per this many times the last rewrite took (<= 5 % of the time).
 REWRITE_SHARE = 20.0
-
-
-class RunWarning(UserWarning):
-    """Something a run or a reader repaired or will do again, said in one line."""
 
 
 @functools.lru_cache(maxsize=1)
@@ -116,14 +113,17 @@ class ResultsFile:
 
     def __init__(self, path: Path | None, resume: bool = False):
         self.path = path
+        # the MACs of the rows (rippleb.integrity), from the run directory's run.json
+        self.ledger = integrity.Ledger(path.parent) if path is not None else None
         self.rows: list[dict] = []
         self._header: list[str] = list(COLUMNS)
         self._lines: list[tuple[tuple, str]] = []   # (row key, CSV line), in key order
         self._written_at = -math.inf                   # monotonic time of the last rewrite
         self._rewrite_s = 0.0                          # how long it took
         if path is not None and resume and path.is_file():
-            self.rows = read_rows(path)
+            self.rows = integrity.verified_rows(path.parent, read_rows(path), path)
             self._format_all()
+            self.ledger.rewrite(self.rows)
 
     def done_keys(self) -> set[tuple]:
         """``(method, scenario, condition, seed)`` of every row already finished."""
@@ -143,10 +143,14 @@ class ResultsFile:
         self.rows.append(row)
         if any(name not in self._header for name in row):
             self._format_all()   # a new column: every line gets a cell for it
+            if self.ledger is not None:
+                self.ledger.append(row)
             self.flush()
             return
         line = self._line(row)
         bisect.insort(self._lines, (row_key(row), line), key=lambda item: item[0])
+        if self.ledger is not None:
+            self.ledger.append(row)   # its MAC first: a row on disk always has one
         due = max(REWRITE_INTERVAL_S, REWRITE_SHARE * self._rewrite_s)
         if self.path is None or time.monotonic() - self._written_at >= due or not self.path.is_file():
             self.flush()
@@ -189,16 +193,7 @@ class ResultsFile:
         return buffer.getvalue()
 
 
-def _cell(value) -> str:
-    """A value as pandas would write it: '' for missing or NaN, ``repr`` of a float
-    (the shortest text that reads back to the same double)."""
-    if value is None:
-        return ""
-    if isinstance(value, (float, np.floating)):
-        return "" if math.isnan(value) else repr(float(value))
-    if isinstance(value, np.integer):
-        return str(int(value))
-    return str(value)
+_cell = integrity.cell_text
 
 
 def say_other_versions(rows: list[dict], out_dir) -> None:
@@ -261,6 +256,21 @@ def read_rows(path: Path) -> list[dict]:
         warnings.warn(f"{path}: ignored {len(dropped)} row(s) that cannot be trusted (first: {dropped[0]})",
                       RunWarning, stacklevel=2)
     return rows
+
+
+def copy_rows(source: Path, target: Path, keys: set) -> None:
+    """Copy ``source`` to ``target`` byte for byte, keeping the header and only the lines
+    whose row key is in ``keys`` (the rows a reader verified); a plain copy when all are."""
+    text = Path(source).read_bytes().decode("utf-8")
+    lines = [line + "\n" for line in text.split("\n")[:-1]]   # rippleb ends every line with "\n"
+    header = next(csv.reader([lines[0]]))
+    kept = [lines[0]]
+    for line in lines[1:]:
+        cells = next(csv.reader([line]), [])
+        row, problem = _check_row(header, cells) if cells else ({}, "empty")
+        if problem is None and row_key(row) in keys:
+            kept.append(line)
+    Path(target).write_text("".join(kept), encoding="utf-8")
 
 
 def _check_row(header: list[str], cells: list[str]) -> tuple[dict, str | None]:

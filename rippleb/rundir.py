@@ -16,6 +16,7 @@ import warnings
 from pathlib import Path
 
 from rippleb.simulator.conditions import DEFAULT_CONDITION
+from rippleb import integrity
 from rippleb.errors import InputError
 from rippleb.files import atomic_path
 from rippleb.results import RunWarning
@@ -49,7 +50,7 @@ def run_dir(out, resume: bool, config: dict, on_start=None):
                                  f"{', ...' if len(kept) > 3 else ''}); finish that run with "
                                  f"--resume {out}, or choose another --out")
             with atomic_path(out / "run.json") as tmp:
-                tmp.write_text(json.dumps(config, indent=1) + "\n")
+                tmp.write_text(json.dumps(integrity.seal_config(config), indent=1) + "\n")
         if on_start is not None:
             on_start()
         yield out
@@ -80,8 +81,10 @@ def _check_resume(out: Path, config: dict) -> None:
         added = [m for m in config["methods"] if m not in saved["methods"]]
         warnings.warn(f"{out / 'run.json'}: adding method(s) {', '.join(added)} to this run "
                       f"(run.json updated)", RunWarning, stacklevel=4)
+        nonce = (saved.get("integrity") or {}).get("nonce")   # the rows' MACs stay valid
         with atomic_path(out / "run.json") as tmp:
-            tmp.write_text(json.dumps({**saved, "methods": config["methods"]}, indent=1) + "\n")
+            tmp.write_text(json.dumps(integrity.seal_config({**saved, "methods": config["methods"]}, nonce),
+                                      indent=1) + "\n")
         return
     if differ:
         name = differ[0]
@@ -105,6 +108,7 @@ def read_config(out) -> dict:
     if "log" in config:
         raise InputError(f"{path}: a run on a recorded log cannot be resumed; run it again")
     _check_fields(config, path)
+    integrity.check_config(config, path)
     return config
 
 

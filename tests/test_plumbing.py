@@ -74,6 +74,11 @@ PROBER = textwrap.dedent('''
         found["run_dir"] = {name: _try_write(os.path.join(run_dir, name)) for name in ("forged.txt", "results.csv")}
         caches = glob.glob(os.path.join(os.environ.get("TMPDIR", "/tmp"), "rippleb-cache-*"))
         found["cache"] = {c: _try_write(os.path.join(c, "forged.npz")) for c in caches}
+        from rippleb.integrity import key_path
+        try:
+            found["key_bytes"] = len(key_path().read_bytes())   # rippleb's key for row MACs
+        except OSError as exc:
+            found["key_bytes"] = type(exc).__name__
         print(FORGED)
         print(FORGED, file=sys.stderr)
         with open(os.environ["PROBE_OUT"] + "." + os.urandom(4).hex(), "w") as fh:
@@ -114,7 +119,7 @@ def test_a_confined_worker_sees_nothing_of_the_run(site, tmp_path):
     run_dir = tmp_path / "run"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]),
            "TMPDIR": str(tmp_path), "PROBE_OUT": str(tmp_path / "found"), "PROBE_RUN_DIR": str(run_dir),
-           "PROBE_RUNNER": "0"}
+           "PROBE_RUNNER": "0", "RIPPLEB_KEY_FILE": str(tmp_path / "key")}
     proc = subprocess.Popen([sys.executable, "-m", "rippleb", "run", "--methods", "prober,raw", "--scenarios",
                              "static-contact", "--seeds", "1", "--jobs", "2", "--no-progress", "--out", str(run_dir)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
@@ -124,6 +129,7 @@ def test_a_confined_worker_sees_nothing_of_the_run(site, tmp_path):
     assert found["visible"] == [1], found["visible"]   # PID 1 of its namespace, alone
     assert found["opened"] == []
     assert found["terminals"] == {}
+    assert (tmp_path / "key").stat().st_size == 32 and found["key_bytes"] == 0   # covered by /dev/null
     _assert_nothing_reached(found, run_dir)
     assert "12 rows (12 ok)" not in out + err
     assert "2 rows (2 ok)" in out + err

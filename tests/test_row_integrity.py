@@ -1,0 +1,120 @@
+"""Rows and run files that rippleb did not write are found (issue 25, item 2).
+
+Every row gets a keyed hash (``rippleb/integrity.py``) under a key only the user's runs
+read; ``--resume`` and ``report`` drop and name the rows whose hash fails, and
+``--resume`` refuses a ``run.json`` changed since it was written. Through the real CLI,
+with the key in the test's own directory (``RIPPLEB_KEY_FILE``).
+"""
+
+import csv
+import io
+import json
+import os
+import subprocess
+import sys
+
+import pandas as pd
+import pytest
+
+pytestmark = pytest.mark.slow
+
+RUN = ["run", "--methods", "raw,lowpass", "--scenarios", "static-contact", "--seeds", "2", "--jobs", "2",
+       "--no-progress"]
+
+
+def _cli(tmp_path, *args, key="key"):
+    env = {**os.environ, "RIPPLEB_KEY_FILE": str(tmp_path / key)}
+    return subprocess.run([sys.executable, "-m", "rippleb", *map(str, args)], capture_output=True, text=True,
+                          env=env, cwd=tmp_path, timeout=300)
+
+
+def _rows(path):
+    return list(csv.DictReader(io.StringIO(path.read_text())))
+
+
+def _write_rows(path, rows):
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    path.write_text(buffer.getvalue())
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    """One finished run (4 rows) and its key, copied by each test that edits it."""
+    where = tmp_path_factory.mktemp("integrity")
+    proc = _cli(where, *RUN, "--out", "run")
+    assert proc.returncode == 0, proc.stderr
+    return where
+
+
+def _copy(finished, tmp_path):
+    import shutil
+
+    shutil.copytree(finished / "run", tmp_path / "run")
+    shutil.copy(finished / "key", tmp_path / "key")
+    return tmp_path / "run"
+
+
+def test_an_untouched_run_verifies_with_no_warning(finished, tmp_path):
+    run = _copy(finished, tmp_path)
+    assert (run / "rows.mac").read_text().count("\n") == 1 + 4     # header and one MAC per row
+    report = _cli(tmp_path, "report", run, "--out", "rep")
+    assert report.returncode == 0, report.stderr
+    assert "warning" not in report.stderr
+    resumed = _cli(tmp_path, "run", "--resume", run, "--no-progress")
+    assert resumed.returncode == 0 and "warning" not in resumed.stderr, resumed.stderr
+
+
+def test_an_edited_row_is_named_dropped_and_run_again(finished, tmp_path):
+    run = _copy(finished, tmp_path)
+    rows = _rows(run / "results.csv")
+    original = rows[2]["rms_error_nm"]
+    rows[2]["rms_error_nm"] = "0.001"                      # a flattering hand edit
+    _write_rows(run / "results.csv", rows)
+    report = _cli(tmp_path, "report", run, "--out", "rep")
+    assert report.returncode == 0, report.stderr
+    assert "ignored 1 row(s) that rippleb did not write or that were changed since" in report.stderr
+    assert "0.001" not in (tmp_path / "rep" / "results.csv").read_text()
+    resumed = _cli(tmp_path, "run", "--resume", run, "--no-progress")
+    assert resumed.returncode == 0, resumed.stderr
+    assert "ignored 1 row(s)" in resumed.stderr
+    again = pd.read_csv(run / "results.csv")
+    assert len(again) == 4 and (again.status == "ok").all()
+    assert again.loc[2, "rms_error_nm"] == pytest.approx(float(original), rel=1e-12)   # recomputed, not kept
+
+
+def test_a_forged_row_and_a_row_from_another_run_are_dropped(finished, tmp_path):
+    run = _copy(finished, tmp_path)
+    other = _cli(tmp_path, *RUN[:-1], "--seeds", "3", "--no-progress", "--out", "other")   # a genuine run, same key
+    assert other.returncode == 0, other.stderr
+    rows = _rows(run / "results.csv")
+    foreign = [r for r in _rows(tmp_path / "other" / "results.csv") if r["seed"] == "2"][0]
+    forged = dict(rows[0], method="lowpass", seed="7", rms_error_nm="0.002")
+    _write_rows(run / "results.csv", rows + [foreign, forged])
+    report = _cli(tmp_path, "report", run, "--out", "rep")
+    assert report.returncode == 0, report.stderr
+    assert "ignored 2 row(s)" in report.stderr
+    assert len(pd.read_csv(tmp_path / "rep" / "results.csv")) == 4
+
+
+def test_a_changed_run_json_is_refused_on_resume(finished, tmp_path):
+    run = _copy(finished, tmp_path)
+    config = json.loads((run / "run.json").read_text())
+    config["seeds"] = [0, 1, 2, 3, 4, 5]                   # the forged seed count of the issue
+    (run / "run.json").write_text(json.dumps(config))
+    resumed = _cli(tmp_path, "run", "--resume", run, "--no-progress")
+    assert resumed.returncode == 2
+    assert resumed.stderr.strip().splitlines()[-1] == (
+        f"rippleb: error: {run / 'run.json'}: changed since rippleb wrote it (its keyed hash does not match); "
+        "rippleb will not resume a run it cannot vouch for: start it again with another --out")
+    assert len(pd.read_csv(run / "results.csv")) == 4     # nothing lost
+
+
+def test_another_users_key_cannot_verify_and_says_so(finished, tmp_path):
+    run = _copy(finished, tmp_path)
+    report = _cli(tmp_path, "report", run, "--out", "rep", key="other-key")
+    assert report.returncode == 0, report.stderr
+    assert "made with another rippleb key" in report.stderr and "cannot be verified here" in report.stderr
+    assert len(pd.read_csv(tmp_path / "rep" / "results.csv")) == 4   # kept, as before MACs existed

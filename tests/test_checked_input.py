@@ -16,6 +16,8 @@ import sys
 
 import pytest
 
+from conftest import vouch_for
+
 import rippleb  # noqa: F401 - before numpy: the portable numeric paths
 from rippleb.cli import main
 from test_bad_input import GOOD, PLUGIN, _dist
@@ -213,6 +215,7 @@ def _edit_cells(path, edits: dict) -> None:
 def test_report_warns_of_a_negative_or_infinite_metric_and_keeps_the_rows(run_copy, capsys):
     _edit_cells(run_copy / "results.csv", {(2, "rms_error_nm"): "-0.5", (3, "max_error_nm"): "inf",
                                            (4, "step_latency_ms"): "-0.2"})    # a lead: legitimate
+    vouch_for(run_copy)   # rows a rippleb wrote (else their hashes fail and they are dropped)
     assert main(["report", str(run_copy), "--no-figures"]) == 0
     err = capsys.readouterr().err
     warning = [line for line in err.splitlines() if "no rippleb run writes" in line]
@@ -230,6 +233,7 @@ def test_resume_names_rows_of_another_rippleb_version(run_copy, capsys):
     _edit_cells(run_copy / "results.csv", {(2, "rippleb_version"): "0.0.1", (3, "rippleb_version"): "0.0.1"})
     lines = (run_copy / "results.csv").read_text().splitlines()
     (run_copy / "results.csv").write_text("\n".join(lines[:-1]) + "\n")   # one row to run again
+    vouch_for(run_copy)   # rows another rippleb version wrote, not forged ones
     assert main(["run", "--resume", str(run_copy), "--no-progress", "--jobs", "1"]) == 0
     err = capsys.readouterr().err
     warning = [line for line in err.splitlines() if "another rippleb version" in line]

@@ -11,6 +11,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from conftest import vouch_for
+
 import rippleb
 from rippleb import InputError
 from rippleb.results import COLUMNS, RunWarning, read_rows
@@ -236,6 +238,7 @@ def test_environmental_failures_are_retried_and_said(fake, tmp_path):
     frame.loc[frame.method == "raw", ["status", "message"]] = ["error", "environment: process killed by SIGKILL"]
     frame.loc[frame.method == "perfect", ["status", "message"]] = ["error", "ValueError: the method's own bug"]
     frame.to_csv(path, index=False)
+    vouch_for(tmp_path)   # rows as rippleb would have written them after those failures
     with pytest.warns(RunWarning, match="running 1 row"):
         again = rippleb.run(methods="raw,perfect", scenarios="paper-quintic", seeds=1, out=tmp_path, resume=True)
     status = dict(zip(again.method, again.status))

@@ -232,6 +232,12 @@ def verified_rows(run_dir: Path, rows: list[dict], results_path: Path) -> list[d
     secret = key(create=False)
     if not _ours(seal, secret, Path(run_dir) / "run.json"):
         return rows
+    config = json.loads((Path(run_dir) / "run.json").read_text())
+    if not hmac.compare_digest(_mac(secret, b"run", str(seal.get("nonce")).encode(), _config_body(config)),
+                               str(seal.get("mac"))):
+        warnings.warn(f"{Path(run_dir) / 'run.json'}: changed since rippleb wrote it (its keyed hash does not "
+                      f"match); what it says of the run (seeds, selection) is not rippleb's", IntegrityWarning,
+                      stacklevel=3)
     try:
         known = set(Path(run_dir, LEDGER).read_text(encoding="ascii").split())
     except (OSError, UnicodeDecodeError):

@@ -104,6 +104,8 @@ def test_a_changed_run_json_is_refused_on_resume(finished, tmp_path):
     config = json.loads((run / "run.json").read_text())
     config["seeds"] = [0, 1, 2, 3, 4, 5]                   # the forged seed count of the issue
     (run / "run.json").write_text(json.dumps(config))
+    report = _cli(tmp_path, "report", run, "--out", "rep")
+    assert report.returncode == 0 and "run.json: changed since rippleb wrote it" in report.stderr, report.stderr
     resumed = _cli(tmp_path, "run", "--resume", run, "--no-progress")
     assert resumed.returncode == 2
     assert resumed.stderr.strip().splitlines()[-1] == (

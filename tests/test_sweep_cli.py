@@ -10,10 +10,10 @@ import tomllib
 import pandas as pd
 import pytest
 
-from rippleb.rows import scenario_hash
+from rippleb.engine.rows import scenario_hash
 from rippleb.scenario import _Parser
 
-from rippleb.sweep_report import figures, points
+from rippleb.report.sweep_report import figures, points
 
 BIN = Path(sys.executable).parent
 ROOT = Path(__file__).resolve().parents[1]
@@ -69,7 +69,7 @@ def test_sweep_rows_equal_runs_of_files_with_the_value_resume_and_figure(tmp_pat
 
 
 def test_sweep_help_lists_every_parameter_with_its_range():
-    from rippleb.sweep import PARAMS
+    from rippleb.engine.sweep import PARAMS
 
     text = rippleb("sweep", "--help").stdout
     for param in PARAMS.values():

@@ -67,22 +67,7 @@ if TYPE_CHECKING:  # what static tools see: the same names, imported eagerly
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 
-def _installed_version() -> str:
-    """The version setuptools-scm recorded at build time (``rippleb/_version.py``, not in
-    git), else the installed distribution's, else ``unknown``."""
-    try:
-        from rippleb._version import __version__ as built
-    except ImportError:
-        from importlib import metadata
-
-        try:
-            return metadata.version("rippleb")
-        except metadata.PackageNotFoundError:
-            return "unknown"
-    return built
-
-
-__version__ = _installed_version()
+from rippleb.version import __version__  # noqa: E402 - what setuptools-scm recorded at build time
 
 __all__ = [
     "CONDITIONS",

@@ -291,12 +291,12 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         One line ``<file>: <key>: <what is wrong>`` for a file that is not TOML, an
         unknown key, a wrong type or an impossible value; or for an unknown name.
     """
-    text, path, name = _read_source(name_or_path)
+    text, path, name = read_source(name_or_path)
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{path}: not valid TOML: {exc}") from None
-    return _Parser(path, name).scenario(raw)
+    return Parser(path, name).scenario(raw)
 
 
 def scenario_from_dict(raw: dict, name: str = "custom") -> Scenario:
@@ -304,10 +304,10 @@ def scenario_from_dict(raw: dict, name: str = "custom") -> Scenario:
 
     Checked exactly like a file; errors name ``<name>`` as the file.
     """
-    return _Parser(Path(f"<{name}>"), name).scenario(raw)
+    return Parser(Path(f"<{name}>"), name).scenario(raw)
 
 
-def _read_source(name_or_path) -> tuple[str, Path, str]:
+def read_source(name_or_path) -> tuple[str, Path, str]:
     candidate = Path(name_or_path)
     if candidate.suffix == ".toml" or candidate.is_file():
         if not candidate.is_file():
@@ -330,7 +330,7 @@ def _read_source(name_or_path) -> tuple[str, Path, str]:
     return resource.read_text(encoding="utf-8"), Path(str(resource)), name
 
 
-class _Parser:
+class Parser:
     """Checks a parsed TOML document key by key and builds the :class:`Scenario`."""
 
     def __init__(self, path: Path, name: str):

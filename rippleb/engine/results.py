@@ -53,7 +53,8 @@ def system_info() -> dict[str, str]:
     """Versions and machine, the same for every row of one run."""
     import numpy
 
-    from rippleb import __version__, numerics
+    from rippleb import numerics
+    from rippleb.version import __version__
 
     return {"rippleb_version": __version__, "python": platform.python_version(),
             "numpy": numpy.__version__, "platform": platform.platform(terse=True), "cpu": _cpu_name(),
@@ -73,20 +74,20 @@ def _cpu_name() -> str:
 
 def row_key(row: dict) -> tuple:
     """``(method, scenario, condition, seed)`` of a row dict, followed by ``(name, value)``
-    of each swept parameter (:data:`rippleb.engine.sweep.PARAMS`) the row has a column for."""
+    of each swept parameter (:data:`rippleb.engine.params.PARAMS`) the row has a column for."""
     base = (row["method"], row["scenario"], row.get("condition", DEFAULT_CONDITION), int(row["seed"]))
     return base + tuple((name, float(row[name])) for name in swept_columns(row))
 
 
 def _swept_kind(name: str) -> type:
-    from rippleb.engine.sweep import PARAMS
+    from rippleb.engine.params import PARAMS
 
     return PARAMS[name].kind
 
 
 def swept_columns(columns) -> list[str]:
     """The swept-parameter columns among ``columns`` (a row dict or a header), sorted."""
-    from rippleb.engine.sweep import PARAMS
+    from rippleb.engine.params import PARAMS
 
     return sorted(name for name in columns if name in PARAMS)
 
@@ -205,7 +206,7 @@ def say_other_versions(rows: list[dict], out_dir) -> None:
     """One warning line when a resumed run's finished rows were made by another rippleb
     version than the rows this process is about to add (both are kept; their numbers may
     differ where the code changed)."""
-    from rippleb import __version__
+    from rippleb.version import __version__
 
     counts: dict[str, int] = {}
     for row in rows:

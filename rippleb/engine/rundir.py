@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import json
+import re
 import warnings
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from rippleb.simulator.conditions import DEFAULT_CONDITION
 from rippleb.errors import InputError
 from rippleb.files import atomic_path
 from rippleb.engine.results import RunWarning
+from rippleb.engine.rows import MAX_SEEDS
 
 
 @contextlib.contextmanager
@@ -109,9 +111,6 @@ def read_config(out) -> dict:
 
 
 def _check_fields(config: dict, path: Path) -> None:
-    from rippleb.engine.runner import MAX_SEEDS
-    from rippleb.engine.sealing import check_commitment
-
     for name in ("methods", "scenarios", "conditions"):
         value = config.get(name)
         if value is None and name == "conditions":
@@ -130,6 +129,17 @@ def _check_fields(config: dict, path: Path) -> None:
                          f"{_shown(config['sweep'])}")
     if "sealed" in config:
         check_commitment(config["sealed"], path)
+
+
+#: A sealed run's commitment as run.json records it (rippleb.engine.sealing.commitment).
+_COMMITMENT = re.compile(r"sha256:[0-9a-f]{64}")
+
+
+def check_commitment(value, path) -> None:
+    """Refuse a ``sealed`` field of ``run.json`` that holds no valid commitment."""
+    if not isinstance(value, dict) or not isinstance(value.get("commitment"), str) \
+            or not _COMMITMENT.fullmatch(value["commitment"]):
+        raise InputError(f"{path}: field 'sealed': expected {{\"commitment\": \"sha256:<64 hex digits>\"}}")
 
 
 def _shown(value) -> str:

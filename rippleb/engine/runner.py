@@ -32,8 +32,6 @@ import time
 import warnings
 from pathlib import Path
 
-import numpy as np
-
 from rippleb import interrupts
 from rippleb.engine import jobs as job_fns
 from rippleb import numerics
@@ -50,8 +48,8 @@ from rippleb.engine.pool import Pool
 from rippleb.registry import Registry
 from rippleb.engine.executors import row_tasks
 from rippleb.engine.results import ResultsFile, RunWarning, row_key, say_other_versions
-from rippleb.engine.rows import (CALIBRATION, FITTING, SCORED, Case, RowKey, scenario_hash, select_conditions,
-                          select_scenarios, split_names)
+from rippleb.engine.rows import (CALIBRATION, FITTING, MAX_SEEDS, SCORED, Case, RowKey, scenario_hash,
+                                 select_conditions, select_scenarios, select_seeds, split_names)
 from rippleb.engine.rundir import log_dir, read_config, run_dir
 from rippleb.engine.scheduler import Plan, State, prepare_cases, progress_bar, record, say_retried, schedule
 
@@ -59,12 +57,6 @@ __all__ = ["run", "run_log", "resolve_methods", "read_config", "check_scenario",
            "default_out_dir", "DEFAULT_SEEDS", "MAX_SEEDS", "DEFAULT_TIMEOUT_S", "DEFAULT_MEMORY_MB"]
 
 DEFAULT_SEEDS = 3
-#: The most seeds (devices) one run may have. 20 devices give the published intervals;
-#: 10 000 narrow a 95 % interval to about 2 % of the device-to-device spread, beyond
-#: anything a comparison needs, and already take weeks of CPU for the default selection
-#: (10 000 x 8 scenarios x 10 methods rows). A larger number is a typo (--seeds 100000
-#: for --seeds 10), which would otherwise plan millions of rows and list every seed in run.json.
-MAX_SEEDS = 10_000
 DEFAULT_TIMEOUT_S = 300.0
 DEFAULT_MEMORY_MB = 4096.0
 
@@ -134,7 +126,7 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, s
     for scenario in scenario_objs:
         check_scenario(scenario)
     condition_list = select_conditions(conditions)
-    seed_list = _seed_list(seeds, seed_start)
+    seed_list = select_seeds(seeds, seed_start)
     calibration = load_scenario(CALIBRATION)
     config = {"methods": names, "conditions": condition_list, "seeds": seed_list,
               "scenarios": [str(Path(s).resolve()) if s.endswith(".toml") else s for s in
@@ -353,27 +345,6 @@ def _warm(registry, plan: Plan) -> None:
 def default_out_dir() -> Path:
     """``runs/<timestamp>/`` in the current directory."""
     return Path("runs") / _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-
-
-def _seed_list(seeds, seed_start: int) -> list[int]:
-    if isinstance(seeds, (int, np.integer)):
-        if seeds < 1:
-            raise InputError(f"--seeds must be at least 1, got {seeds}")
-        if seeds > MAX_SEEDS:
-            raise InputError(f"--seeds {seeds}: at most {MAX_SEEDS} devices per run (docs/design.md); "
-                             f"split a larger study into runs with --seed-start")
-        if seed_start < 0:
-            raise InputError(f"--seed-start must be a non-negative integer, got {seed_start}")
-        return list(range(seed_start, seed_start + int(seeds)))
-    seeds = [int(s) for s in seeds]
-    if not seeds:
-        raise InputError("no seeds given")
-    if any(s < 0 for s in seeds):
-        raise InputError(f"seeds must be non-negative integers, got {min(seeds)}")
-    seeds = list(dict.fromkeys(seeds))
-    if len(seeds) > MAX_SEEDS:
-        raise InputError(f"{len(seeds)} seeds: at most {MAX_SEEDS} devices per run (docs/design.md)")
-    return seeds
 
 
 # ----------------------------------------------------------------------------- in-process helpers

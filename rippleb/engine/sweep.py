@@ -24,81 +24,10 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
+from rippleb.engine.params import PARAMS, UNMODELLED_RANGES, Param  # noqa: F401 - re-exported
 from rippleb.errors import InputError
-from rippleb.mismatch import KNOBS as _KNOBS
 from rippleb.registry import unknown_name
 
-
-@dataclass(frozen=True)
-class Param:
-    """A parameter that can be swept: where it lives, its type, its valid range and why.
-
-    Attributes
-    ----------
-    name
-        The dotted key in a scenario file, also the result column.
-    kind
-        ``int`` or ``float``.
-    low, high
-        Valid range, inclusive.
-    doc
-        What it changes, one line (``rippleb sweep --help`` lists it).
-    device
-        True for the joint's hardware (encoder, DAQ, gear): the calibration session is
-        run on the same hardware, so it is swept too. False for a property of the scored
-        session only (its temperature): the calibration keeps its own.
-    """
-
-    name: str
-    kind: type
-    low: float
-    high: float
-    doc: str
-    device: bool = True  # a property of the device: its calibration session has it too
-
-    def parse(self, text: str):
-        """One value from the command line, range-checked; raises one clear line."""
-        try:
-            value = self.kind(text) if self.kind is float else int(text, 10)
-        except ValueError:
-            raise InputError(f"--param {self.name}: {text!r} is not {'an integer' if self.kind is int else 'a number'}") from None
-        if not self.low <= value <= self.high:
-            raise InputError(f"--param {self.name}: {value:g} is outside the valid range "
-                             f"[{self.low:g}, {self.high:g}]")
-        return value
-
-
-#: Every sweepable parameter (docs/sweeps.md lists them with the reasons for their ranges).
-PARAMS = {p.name: p for p in (
-    Param("joint.counts_per_rev", int, 64, 2**20,
-          "encoder positions per motor revolution (paper: 2500)"),
-    Param("joint.fs", float, 2_000.0, 100_000.0,
-          "DAQ sample rate of strain and current [Hz] (default 20 kHz)"),
-    Param("joint.control_rate", float, 100.0, 10_000.0,
-          "control tick rate [Hz] (default 1 kHz); must not exceed joint.fs"),
-    Param("joint.gear_ratio", float, 30.0, 160.0,
-          "harmonic-drive reduction (size-25 catalogue ratios 30-160; default 100)"),
-    Param("temperature_c", float, -10.0, 80.0,
-          "lubricant temperature of the scored session [degC] (default 40)", device=False),
-    Param("ripple.drift", float, 0.0, 5.0,
-          "drift of ripple and bridge zero since calibration, x the documented estimate "
-          "(default 1); acts under --conditions aged only", device=False),
-)}
-
-#: The physics beyond the methods' models (:mod:`rippleb.mismatch`, docs/physics.md "Beyond
-#: the methods' models"), one parameter per knob: properties of the joint, so its calibration
-#: session has them too. A value set by a sweep acts under every condition; under
-#: ``realistic`` the knobs not swept keep their documented magnitudes. Ranges: from off to a
-#: few times the ``realistic`` magnitude (docs/sweeps.md gives the reason for each).
-UNMODELLED_RANGES = {
-    "mismatch.gauge_mode_hz": (0.0, 5000.0), "mismatch.load_saturation": (0.0, 5.0),
-    "mismatch.flank_asymmetry": (0.0, 0.5), "thermal.gain_coeff": (-1.0e-3, 1.0e-3),
-    "thermal.warmup_rate": (0.0, 10.0), "daq.adc_bits": (8, 24), "daq.antialias_hz": (0.0, 20_000.0),
-    "daq.pwm_mv": (0.0, 100.0), "daq.pwm_hz": (4000.0, 100_000.0), "encoder.edge_error": (0.0, 30.0),
-    "encoder.eccentricity": (0.0, 5.0), "encoder.missed": (0.0, 1.0e-3),
-    "controller.bandwidth_factor": (0.5, 3.0),
-}
-PARAMS.update({k.name: Param(k.name, k.kind, *UNMODELLED_RANGES[k.name], k.doc) for k in _KNOBS})
 
 #: Parameters that change only the scored session of one condition: sweeping them
 #: without it would give every grid point the same rows.
@@ -167,13 +96,13 @@ def swept_scenario(name_or_path, point: dict):
     impossible combination (e.g. a control rate above the swept sample rate) is refused
     with the file, key and the swept values named.
     """
-    from rippleb.scenario import _Parser, _read_source
+    from rippleb.scenario import Parser, read_source
 
-    text, path, name = _read_source(name_or_path)
+    text, path, name = read_source(name_or_path)
     raw = apply(tomllib.loads(text), point)
     where = ", ".join(f"{k}={v}" for k, v in point.items())
     try:
-        return _Parser(path, name).scenario(raw)
+        return Parser(path, name).scenario(raw)
     except InputError as exc:
         raise InputError(f"{exc} (with {where})") from None
 
@@ -203,7 +132,7 @@ def run_sweep(params, methods=None, scenarios=None, seeds=None, *, conditions=No
     from rippleb.engine.checks import check_options, check_scenario
     from rippleb.registry import Registry
     from rippleb.engine.results import KEY_COLUMNS
-    from rippleb.engine.rows import CALIBRATION, select_conditions, select_scenarios, split_names
+    from rippleb.engine.rows import CALIBRATION, select_conditions, select_scenarios, select_seeds, split_names
     from rippleb.scenario import load_scenario, scored_scenarios
 
     sweeps = parse_params(_specs(params))
@@ -229,7 +158,7 @@ def run_sweep(params, methods=None, scenarios=None, seeds=None, *, conditions=No
         if needed and needed not in condition_list:
             raise InputError(f"--param {sweep.name}: acts only under the {needed!r} condition; "
                              f"add --conditions {needed} (given: {','.join(condition_list)})")
-    seed_list = runner._seed_list(runner.DEFAULT_SEEDS if seeds is None else seeds, seed_start)
+    seed_list = select_seeds(runner.DEFAULT_SEEDS if seeds is None else seeds, seed_start)
     config = {"methods": names, "conditions": condition_list, "seeds": seed_list,
               "scenarios": [str(Path(s).resolve()) if s.endswith(".toml") else s for s in dict.fromkeys(given)],
               "sweep": {s.name: list(s.values) for s in sweeps}}

@@ -34,7 +34,7 @@ def collect_provenance(argv=None) -> dict:
     import numpy
     import scipy
 
-    from rippleb import __version__
+    from rippleb.version import __version__
     from rippleb.engine.results import system_info
 
     return {"command": shlex.join(["rippleb", *(sys.argv[1:] if argv is None else argv)]),
@@ -135,14 +135,12 @@ def git_state(root: Path | None = None) -> dict:
 def build_commit() -> dict | None:
     """The commit setuptools-scm saw when this package was built (``rippleb/_version.py``):
     ``{"commit": short hash, "dirty": bool}``, or None if it was built outside git."""
-    try:
-        from rippleb import _version
-    except ImportError:
-        return None
-    commit = getattr(_version, "__commit_id__", None)
+    from rippleb.version import built
+
+    version, commit = built() or (None, None)
     if not commit:
         return None
-    return {"commit": str(commit).removeprefix("g"), "dirty": built_dirty(str(_version.__version__))}
+    return {"commit": str(commit).removeprefix("g"), "dirty": built_dirty(version)}
 
 
 def built_dirty(version: str) -> bool:
@@ -187,7 +185,7 @@ def read_run_provenance(run_dir: Path) -> dict:
 
 def provenance_markdown(prov: dict) -> str:
     """The provenance section of the README (values as recorded, none typed)."""
-    from rippleb.report.tables import markdown
+    from rippleb.report.markdown import markdown
 
     run, rep = prov.get("run", {}), prov["report"]
     rows = [["command of the run", _code(run.get("command", "not recorded (run made through the Python API)"))],

@@ -46,7 +46,7 @@ def points(frame, column: str):
     95 % half-width and number of seeds of the RMS error over the ``ok`` rows."""
     import pandas as pd
 
-    from rippleb.report.writer import t_interval
+    from rippleb.report.stats import t_interval
 
     others = [c for c in swept_columns(frame.columns) if c != column]
     ok = frame[frame["status"] == "ok"]
@@ -59,7 +59,7 @@ def points(frame, column: str):
 
 
 def _plot(frame, column: str, out_dir: Path) -> Path:
-    from rippleb.report.figures import _pyplot, _save, style
+    from rippleb.report.plotting import _pyplot, _save, style
 
     plt = _pyplot()
     table = points(frame, column)

@@ -26,7 +26,7 @@ PAPER_CITATION = ("Jung, Kim, Koo, Choi and Moon, IEEE/ASME Trans. Mechatronics 
 
 
 def _markdown(rows, headers) -> str:
-    from rippleb.report.tables import markdown
+    from rippleb.report.markdown import markdown
 
     return markdown(rows, headers)
 

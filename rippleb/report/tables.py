@@ -15,6 +15,7 @@ import numpy as np
 from rippleb.report.stats import (condition_order, fmt_interval, interval_frame, method_order,
                            ok_rows, per_seed_mean_over_scenarios, scenario_order, t_interval,
                            with_condition)
+from rippleb.report.markdown import escape_cell, first_line, markdown, one_line, plural  # noqa: F401 - re-exported
 from rippleb.report.table_one import TABLE_I_METHODS, TABLE_I_SCENARIO
 
 #: Columns of the accuracy matrices: (title, unit).
@@ -45,34 +46,6 @@ NOISY_TAIL = 20.0
 
 
 # --------------------------------------------------------------------------- helpers
-
-def markdown(rows, headers) -> str:
-    """A GitHub Markdown table; cells are printed as given, but for ``|``, escaped as ``\\|``
-    (a scenario file ``a|b.toml`` would otherwise split its cell in two)."""
-    from tabulate import tabulate
-
-    rows = [[escape_cell(c) for c in row] for row in rows]
-    return tabulate(rows, headers=[escape_cell(h) for h in headers], tablefmt="github", disable_numparse=True)
-
-
-def escape_cell(value):
-    """A table cell with every ``|`` escaped for Markdown (other values unchanged)."""
-    return value.replace("|", "\\|") if isinstance(value, str) else value
-
-
-def plural(n: int, word: str) -> str:
-    return f"{n} {word}{'' if n == 1 else 's'}"
-
-
-def _first_line(message) -> str:
-    text = "" if message is None or (isinstance(message, float) and np.isnan(message)) else str(message)
-    return text.splitlines()[0] if text.strip() else "(no message)"
-
-
-def one_line(message) -> str:
-    text = "" if message is None or (isinstance(message, float) and np.isnan(message)) else str(message)
-    return text.splitlines()[0][:200].replace("|", "/") if text else ""
-
 
 def conditions_of(frame) -> list[str]:
     """The conditions of ``frame``'s rows in :func:`~rippleb.report.stats.condition_order`."""
@@ -411,6 +384,6 @@ def summary_text(frame) -> str:
         parts += ["", "Rows that did not finish ok:", ""]
         for r in failed.itertuples():
             parts.append(f"- {r.method} / {r.scenario} / {r.condition} / seed {r.seed}: {r.status}"[:SUMMARY_WIDTH])
-            parts.append(textwrap.fill(_first_line(r.message), SUMMARY_WIDTH, initial_indent="    ",
+            parts.append(textwrap.fill(first_line(r.message), SUMMARY_WIDTH, initial_indent="    ",
                                        subsequent_indent="    ", break_on_hyphens=False))
     return "\n".join(parts)

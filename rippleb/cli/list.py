@@ -1,6 +1,6 @@
 """``rippleb list``: every method, scenario and deployment condition, one line each.
 
-Kept apart from :mod:`rippleb.cli`, which builds the parser and calls :func:`add_list`.
+The parser (:mod:`rippleb.cli.program`) calls :func:`add_list`.
 Plugins are imported only in isolated children (:func:`probe_plugins`), each under a timeout.
 """
 
@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 
+from rippleb.cli.options import limit
 from rippleb.errors import RipplebError
 
 PLUGIN_IMPORT_TIMEOUT_S = 20.0
@@ -32,13 +33,12 @@ LIST_WIDTH = 100
 
 def cmd_list(args) -> int:
     """``rippleb list``."""
-    from rippleb.cli.program import _limit
     from rippleb.registry import Registry
     from rippleb.scenario import builtin_scenarios, load_scenario
     from rippleb.simulator.conditions import CONDITIONS
 
     registry = Registry.discover()
-    timeout = _limit("--import-timeout", args.import_timeout) or None
+    timeout = limit("--import-timeout", args.import_timeout) or None
     errors, docs = probe_plugins(registry, timeout)
     print("methods:")
     for name in registry.names():

@@ -1,14 +1,17 @@
-"""Options of ``rippleb run`` that combine with others, and the combinations refused.
+"""Options more than one command takes, and the combinations refused.
 
-Kept apart from :mod:`rippleb.cli` (which builds the parser): the sealing options
-(:mod:`rippleb.engine.sealing`) and the checks that an option given with ``--resume`` or
-``--log`` is not silently ignored.
+The sealing options of ``run`` (:mod:`rippleb.engine.sealing`), the executor options of
+``run`` and ``sweep`` (``--executor``, ``--scheduler``), the limits (``--timeout``,
+``--memory-limit``, ``--import-timeout``), and the checks that an option given with
+``--resume`` or ``--log`` is not silently ignored.
 """
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
+from rippleb.engine.dask_connect import CONNECT_TIMEOUT_S
 from rippleb.errors import InputError
 
 
@@ -47,3 +50,37 @@ def check_sweep_options(args) -> None:
     if args.resume is not None and args.out is not None:
         raise InputError(f"--out does not apply with --resume {args.resume} (the run directory is "
                          f"{args.resume})")
+
+
+def limit(flag: str, value: float) -> float | None:
+    """A ``--timeout``/``--memory-limit`` value: 0 means none; negative or NaN is refused."""
+    if not math.isfinite(value) or value < 0:
+        raise InputError(f"{flag} must be a positive number (0 for no limit), got {value:g}")
+    return value or None
+
+
+def add_executor_options(p) -> None:
+    p.add_argument("--executor", choices=("local", "dask"), default="local",
+                   help="where rows run: 'local' forked processes (default), or 'dask': a local "
+                        "dask cluster of --jobs worker processes (see docs/scale.md)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run the rows on the dask.distributed cluster of this scheduler "
+                        "(e.g. tcp://10.0.0.5:8786); implies --executor dask")
+    p.add_argument("--connect-timeout", type=float, default=CONNECT_TIMEOUT_S, metavar="S",
+                   help=f"seconds the --scheduler has to answer, and to come back if it is lost mid-run "
+                        f"(default {CONNECT_TIMEOUT_S:g})")
+
+
+def executor(args):
+    """The executor the options ask for: None for the local pool."""
+    if args.scheduler is None and args.executor == "local":
+        return None
+    if getattr(args, "log", None) is not None:
+        raise InputError("--executor dask/--scheduler do not apply with --log (a recorded log runs "
+                         "on the local pool)")
+    from rippleb.engine.dask_executor import DaskExecutor
+
+    timeout = args.connect_timeout
+    if not (math.isfinite(timeout) and timeout > 0):
+        raise InputError(f"--connect-timeout must be a positive number of seconds, got {timeout:g}")
+    return DaskExecutor(scheduler=args.scheduler, workers=args.jobs, connect_timeout=timeout)

@@ -1,48 +1,18 @@
-"""``rippleb sweep`` and the executor options of ``run`` and ``sweep`` (``--executor``, ``--scheduler``).
+"""``rippleb sweep``: the benchmark over a grid of scenario parameters (docs/sweeps.md).
 
-Kept apart from :mod:`rippleb.cli`, which builds the parser and calls :func:`add_sweep`
-and :func:`add_executor_options`; the helpers shared with ``run`` (provenance, limits)
-are imported from it when a command runs.
+A sweep is a run with more rows: it is recorded like ``run`` (:func:`rippleb.cli.run.recorded`)
+and takes the same executor options (:mod:`rippleb.cli.options`).
 """
 
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import time
 from pathlib import Path
 
-from rippleb.cli.options import check_sweep_options
-from rippleb.engine.dask_connect import CONNECT_TIMEOUT_S
-from rippleb.errors import InputError
-
-
-def add_executor_options(p) -> None:
-    p.add_argument("--executor", choices=("local", "dask"), default="local",
-                   help="where rows run: 'local' forked processes (default), or 'dask': a local "
-                        "dask cluster of --jobs worker processes (see docs/scale.md)")
-    p.add_argument("--scheduler", metavar="ADDRESS",
-                   help="run the rows on the dask.distributed cluster of this scheduler "
-                        "(e.g. tcp://10.0.0.5:8786); implies --executor dask")
-    p.add_argument("--connect-timeout", type=float, default=CONNECT_TIMEOUT_S, metavar="S",
-                   help=f"seconds the --scheduler has to answer, and to come back if it is lost mid-run "
-                        f"(default {CONNECT_TIMEOUT_S:g})")
-
-
-def executor(args):
-    """The executor the options ask for: None for the local pool."""
-    if args.scheduler is None and args.executor == "local":
-        return None
-    if getattr(args, "log", None) is not None:
-        raise InputError("--executor dask/--scheduler do not apply with --log (a recorded log runs "
-                         "on the local pool)")
-    from rippleb.engine.dask_executor import DaskExecutor
-
-    timeout = args.connect_timeout
-    if not (math.isfinite(timeout) and timeout > 0):
-        raise InputError(f"--connect-timeout must be a positive number of seconds, got {timeout:g}")
-    return DaskExecutor(scheduler=args.scheduler, workers=args.jobs, connect_timeout=timeout)
+from rippleb.cli.options import add_executor_options, check_sweep_options, executor, limit
+from rippleb.cli.run import recorded, report_broken_plugins
 
 
 def add_sweep(sub) -> None:
@@ -84,19 +54,16 @@ def add_sweep(sub) -> None:
 
 def cmd_sweep(args) -> int:
     """``rippleb sweep``."""
-    from rippleb.cli.program import recorded
-
     return recorded(args, _sweep)
 
 
 def _sweep(args, start: float) -> int:
     from rippleb.engine import runner
-    from rippleb.cli.program import _limit, _report_broken_plugins
     from rippleb.engine.sweep import run_sweep, specs_from_config
 
     check_sweep_options(args)
-    options = dict(jobs=args.jobs, timeout=_limit("--timeout", args.timeout),
-                   memory_mb=_limit("--memory-limit", args.memory_limit),
+    options = dict(jobs=args.jobs, timeout=limit("--timeout", args.timeout),
+                   memory_mb=limit("--memory-limit", args.memory_limit),
                    progress=False if args.no_progress else None, executor=executor(args),
                    on_start=lambda: setattr(args, "started", True))
     if args.resume is not None:
@@ -117,4 +84,4 @@ def _sweep(args, start: float) -> int:
     print(f"{len(frame)} rows ({', '.join(f'{v} {k}' for k, v in counts.items()) or 'none'}) "
           f"in {args.out_dir / 'results.csv'}; total wall time {time.perf_counter() - start:.1f} s; "
           f"figures: rippleb report {args.out_dir}")
-    return _report_broken_plugins(frame)
+    return report_broken_plugins(frame)

@@ -136,7 +136,7 @@ def emulate_power_cycle(seeds, scenarios, methods) -> None:
     Prints the mean ``rms_error_nm`` per scenario and method, same-session beside it.
     """
     from rippleb.registry import Registry
-    from rippleb.runner import evaluate
+    from rippleb.engine.runner import evaluate
 
     registry = Registry.discover()
     print("| scenario | method | same-session | power-cycled (emulated) |")

@@ -74,8 +74,8 @@ def compare(before_path: str, after_path: str) -> str:
 
 
 def spread(before_path: str, after_path: str) -> str:
-    from rippleb.stats import interval_frame
-    from rippleb.tables import ACCURACY_COLUMNS
+    from rippleb.report.stats import interval_frame
+    from rippleb.report.tables import ACCURACY_COLUMNS
 
     before, after = common_rows(load(before_path), load(after_path))
     before, after = before.sort_values(KEY).reset_index(drop=True), after.sort_values(KEY).reset_index(drop=True)

@@ -26,7 +26,7 @@ def cases(seeds: int, sweep_seeds: int):
     """``(label, scenario, seed, condition)`` of every published case."""
     from rippleb.scenario import load_scenario, scored_scenarios
     from rippleb.simulator.conditions import CONDITIONS
-    from rippleb.sweep import swept_scenario
+    from rippleb.engine.sweep import swept_scenario
 
     for seed in range(seeds):
         yield "calibration", load_scenario("calibration"), seed, "same-session"
@@ -44,7 +44,7 @@ def cases(seeds: int, sweep_seeds: int):
 
 
 def main(argv=None) -> int:
-    from rippleb.checks import check_scenario
+    from rippleb.engine.checks import check_scenario
     from rippleb.errors import InputError
     from rippleb.simulator import simulate
     from rippleb.simulator.validity import check_simulation, peak_torque

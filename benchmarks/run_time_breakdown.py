@@ -29,7 +29,7 @@ def _timed(fn) -> float:
 
 def breakdown(run_dir: Path) -> pd.DataFrame:
     from rippleb.metrics import Truth, score
-    from rippleb.results import read_rows
+    from rippleb.engine.results import read_rows
     from rippleb.simulator import simulate
 
     rows = pd.DataFrame(read_rows(run_dir / "results.csv"))

@@ -30,7 +30,7 @@ from rippleb._lazy import lazy_exports  # noqa: E402
 _EXPORTS = {
     "CONDITIONS": "rippleb.simulator.conditions",
     "DEFAULT_CONDITION": "rippleb.simulator.conditions",
-    "DaskExecutor": "rippleb.dask_executor",
+    "DaskExecutor": "rippleb.engine.dask_executor",
     "JointSpec": "rippleb.data",
     "SensorBlock": "rippleb.data",
     "SensorLog": "rippleb.data",
@@ -41,48 +41,33 @@ _EXPORTS = {
     "PluginError": "rippleb.errors",
     "RipplebError": "rippleb.errors",
     "Method": "rippleb.method",
-    "run": "rippleb.runner",
-    "run_log": "rippleb.runner",
+    "run": "rippleb.engine.runner",
+    "run_log": "rippleb.engine.runner",
     "Scenario": "rippleb.scenario",
     "builtin_scenarios": "rippleb.scenario",
     "load_scenario": "rippleb.scenario",
     "scored_scenarios": "rippleb.scenario",
     "Simulation": "rippleb.simulator",
     "simulate": "rippleb.simulator",
-    "run_sweep": "rippleb.sweep",
+    "run_sweep": "rippleb.engine.sweep",
 }
 
 if TYPE_CHECKING:  # what static tools see: the same names, imported eagerly
     from rippleb.simulator.conditions import CONDITIONS, DEFAULT_CONDITION
-    from rippleb.dask_executor import DaskExecutor
+    from rippleb.engine.dask_executor import DaskExecutor
     from rippleb.data import JointSpec, SensorBlock, SensorLog, make_log, read_log, write_log
     from rippleb.errors import InputError, PluginError, RipplebError
     from rippleb.method import Method
-    from rippleb.runner import run, run_log
+    from rippleb.engine.runner import run, run_log
     from rippleb.scenario import Scenario, builtin_scenarios, load_scenario, scored_scenarios
     from rippleb.simulator import Simulation, simulate
-    from rippleb.sweep import run_sweep
+    from rippleb.engine.sweep import run_sweep
 
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 
-def _installed_version() -> str:
-    """The version setuptools-scm recorded at build time (``rippleb/_version.py``, not in
-    git), else the installed distribution's, else ``unknown``."""
-    try:
-        from rippleb._version import __version__ as built
-    except ImportError:
-        from importlib import metadata
-
-        try:
-            return metadata.version("rippleb")
-        except metadata.PackageNotFoundError:
-            return "unknown"
-    return built
-
-
-__version__ = _installed_version()
+from rippleb.version import __version__  # noqa: E402 - what setuptools-scm recorded at build time
 
 __all__ = [
     "CONDITIONS",

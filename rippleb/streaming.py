@@ -1,6 +1,6 @@
 """The causal streaming loop: blocks in time order, each ``step`` call timed.
 
-Kept apart from the process machinery of :mod:`rippleb.runner` so that the conformance
+Kept apart from the process machinery of :mod:`rippleb.engine.runner` so that the conformance
 checks (:mod:`rippleb.testing`) and the harness benchmark run exactly this loop.
 """
 

@@ -36,7 +36,7 @@ def pytest_configure(config):
     them from numba's on-disk cache."""
     _check_numerics()
     if config.getoption("--full") and not hasattr(config, "workerinput"):
-        from rippleb.dask_worker import _load_modules  # what a Dask worker preloads
+        from rippleb.engine.dask_worker import _load_modules  # what a Dask worker preloads
 
         _load_modules()
 
@@ -84,7 +84,7 @@ def lock_versions() -> dict[str, str]:
 
 
 def off_lock() -> list[str]:
-    """The packages that compute numbers (``rippleb.provenance.NUMBER_PRODUCERS``) whose
+    """The packages that compute numbers (``rippleb.report.provenance.NUMBER_PRODUCERS``) whose
     installed version is not the one in ``constraints.txt``, as ``name X (lock Y)``.
 
     Empty in the environment that produced ``results/``: there the published rows and
@@ -93,7 +93,7 @@ def off_lock() -> list[str]:
     """
     from importlib import metadata
 
-    from rippleb.provenance import NUMBER_PRODUCERS
+    from rippleb.report.provenance import NUMBER_PRODUCERS
 
     lock = lock_versions()
     off = []
@@ -148,6 +148,6 @@ def vouch_for(run_dir) -> None:
     from pathlib import Path
 
     from rippleb.integrity import Ledger
-    from rippleb.results import read_rows
+    from rippleb.engine.results import read_rows
 
     Ledger(Path(run_dir)).rewrite(read_rows(Path(run_dir) / "results.csv"))

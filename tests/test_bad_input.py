@@ -274,7 +274,7 @@ def test_a_pickle_disguised_as_a_log_is_not_executed(tmp_path):
 
 
 def test_the_cache_refuses_pickled_arrays(tmp_path):
-    from rippleb.cache import log_from_bytes, unpack
+    from rippleb.engine.cache import log_from_bytes, unpack
 
     marker = tmp_path / "PWNED"
     payload = np.empty(1, dtype=object)
@@ -293,8 +293,8 @@ def test_scenario_and_log_readers_use_no_code_loaders():
         source = (root / name).read_text()
         for banned in ("pickle", "eval(", "exec(", "yaml", "allow_pickle=True", "__import__"):
             assert banned not in source, (name, banned)
-    assert "allow_pickle=False" in (root / "cache.py").read_text()
-    for name in ("runner.py", "pool.py", "cache.py"):   # the runner never unpickles what a job sends
+    assert "allow_pickle=False" in (root / "engine" / "cache.py").read_text()
+    for name in ("engine/runner.py", "engine/pool.py", "engine/cache.py"):   # the runner never unpickles what a job sends
         assert "pickle.load" not in (root / name).read_text(), name
 
 

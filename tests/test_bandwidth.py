@@ -6,9 +6,9 @@ import pytest
 
 from rippleb.metrics import TRUTH_ARRAYS, Truth
 from rippleb.registry import Registry
-from rippleb.cache import unpack
-from rippleb.jobs import truth_from_message, truth_message
-from rippleb.runner import evaluate
+from rippleb.engine.cache import unpack
+from rippleb.engine.jobs import truth_from_message, truth_message
+from rippleb.engine.runner import evaluate
 from rippleb.simulator import simulate
 
 SEED = 900

@@ -79,7 +79,7 @@ def test_options_that_resume_would_ignore_are_refused(tmp_path, monkeypatch, cap
 
 
 def test_seeds_have_an_upper_bound(tmp_path, monkeypatch, capsys):
-    from rippleb.runner import MAX_SEEDS
+    from rippleb.engine.runner import MAX_SEEDS
 
     monkeypatch.chdir(tmp_path)
     assert main(["run", "--methods", "raw", "--seeds", "100000", "--out", "out"]) == 2
@@ -156,7 +156,7 @@ def _table_lines(text: str) -> list[str]:
 def test_a_bar_in_a_scenario_name_stays_in_its_cell(run_copy, capsys):
     import re
 
-    from rippleb.html_report import _markdown_table
+    from rippleb.report.html_report import _markdown_table
 
     assert main(["report", str(run_copy), "--no-figures", "--html"]) == 0
     readme = (run_copy / "report" / "README.md").read_text()

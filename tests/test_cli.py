@@ -158,7 +158,7 @@ def test_non_editable_install_lists_builtins(tmp_path):
     # the installed copy knows the commit it was built from (setuptools-scm), without git
     head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True)
     if head.returncode == 0:
-        state = subprocess.run([sys.executable, "-c", "from rippleb.provenance import git_state; "
+        state = subprocess.run([sys.executable, "-c", "from rippleb.report.provenance import git_state; "
                                 "s = git_state(); print(s['git_commit'], s.get('git_source'))"],
                                capture_output=True, text=True, cwd=elsewhere, env=env).stdout.split()
         assert state == [head.stdout.strip(), "build"]

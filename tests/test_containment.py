@@ -17,7 +17,7 @@ import time
 import pandas as pd
 import pytest
 
-from rippleb.pool import Pool
+from rippleb.engine.pool import Pool
 from test_bad_input import _dist  # a minimal installed distribution without pip
 
 GIB = 2**30

@@ -8,7 +8,7 @@ import pytest
 
 from rippleb import numerics
 from rippleb.cli import main
-from rippleb.provenance import (NUMBER_PRODUCERS, collect_provenance, environment, environment_changes,
+from rippleb.report.provenance import (NUMBER_PRODUCERS, collect_provenance, environment, environment_changes,
                                 environment_sentence, environment_warnings)
 
 

@@ -10,7 +10,7 @@ import pytest
 import rippleb
 from rippleb import Method
 from rippleb.metrics import Truth
-from rippleb.runner import evaluate
+from rippleb.engine.runner import evaluate
 from test_runner import fake_simulate
 
 ACCURACY = ["rms_error_nm", "max_error_nm", "rms_error_ref_nm", "max_error_ref_nm", "delay_ms",

@@ -4,8 +4,8 @@ import os
 
 import pytest
 
-from rippleb.forkserver import ForkServer
-from rippleb.pool import Pool
+from rippleb.engine.forkserver import ForkServer
+from rippleb.engine.pool import Pool
 
 SECRET = []  # filled by the test after the server was forked: the job must not see it
 

@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from rippleb import html_report
+from rippleb.report import html_report
 from rippleb.metrics import METRIC_COLUMNS
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -77,7 +77,7 @@ def test_page_renders_in_headless_chromium_without_javascript_errors(tmp_path):
         if os.environ.get("CI") == "true":
             pytest.fail("chromium is not installed; .ci/run installs Debian's chromium package")
         pytest.skip("chromium is not installed (apt-get install chromium); CI runs this test")
-    from rippleb.report import report
+    from rippleb.report.writer import report
 
     run = tmp_path / "run"
     run.mkdir()

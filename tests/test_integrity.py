@@ -256,7 +256,7 @@ def test_where_the_cache_is_writable_a_rewrite_fails_the_rows_it_tampered(tmp_pa
                                                                             register_methods):
     """Without a mount namespace (a kernel that refuses it) the worker can write the cache;
     the SHA-256 of every cached file, taken before any method ran, still catches it."""
-    from rippleb import isolation
+    from rippleb.engine import isolation
 
     namespace = {}
     exec(HOSTILE, namespace)
@@ -348,7 +348,7 @@ def test_no_process_outlives_its_row(tmp_path, monkeypatch, namespaces, register
     import importlib
 
     import rippleb
-    from rippleb import isolation
+    from rippleb.engine import isolation
 
     (tmp_path / "spawns_mod.py").write_text(SPAWNS)
     monkeypatch.syspath_prepend(str(tmp_path))
@@ -386,8 +386,8 @@ def test_a_job_that_signals_its_group_cannot_kill_its_keeper(monkeypatch, namesp
     the job reports; without one the worker ends itself, and the keeper lives to report the
     signal (before, it died with it, and the row's cause was lost or, when the worker was
     still fast enough, the row was saved by luck)."""
-    from rippleb import isolation
-    from rippleb.pool import Pool
+    from rippleb.engine import isolation
+    from rippleb.engine.pool import Pool
 
     if not namespaces:
         monkeypatch.setattr(isolation, "new_namespaces", lambda: (False, False))

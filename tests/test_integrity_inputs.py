@@ -15,7 +15,7 @@ from conftest import vouch_for
 
 import rippleb
 from rippleb import InputError
-from rippleb.results import COLUMNS, RunWarning, read_rows
+from rippleb.engine.results import COLUMNS, RunWarning, read_rows
 from test_runner import fake, fake_simulate  # noqa: F401 - the fixture is used by name
 
 SCENARIO = textwrap.dedent("""\
@@ -166,7 +166,7 @@ def _row(seed: int) -> dict:
 def test_rows_are_appended_between_rewrites_and_none_is_lost(tmp_path, monkeypatch):
     """Each finished row is on disk when ``add`` returns, appended without rewriting the file;
     ``flush`` puts the file back in key order, equal to the rows in memory."""
-    from rippleb import results
+    from rippleb.engine import results
 
     monkeypatch.setattr(results, "REWRITE_INTERVAL_S", 1e9)
     rewrites = []
@@ -186,7 +186,7 @@ def test_rows_are_appended_between_rewrites_and_none_is_lost(tmp_path, monkeypat
 
 def test_the_whole_file_is_rewritten_once_the_interval_passes(tmp_path, monkeypatch):
     """An edit of the file by anyone else lasts until the next rewrite from memory."""
-    from rippleb import results
+    from rippleb.engine import results
 
     monkeypatch.setattr(results, "REWRITE_INTERVAL_S", 0.0)
     monkeypatch.setattr(results, "REWRITE_SHARE", 0.0)
@@ -385,17 +385,17 @@ def test_report_refuses_a_missing_metric_column(fake, tmp_path):
 def test_a_full_disk_is_environmental_and_retried(fake, tmp_path, monkeypatch):
     import errno
 
-    import rippleb.jobs
+    import rippleb.engine.jobs
 
-    real_store = rippleb.jobs.store
+    real_store = rippleb.engine.jobs.store
 
     def full(path, data):
         raise InputError(f"{path}: cannot write: {os.strerror(errno.ENOSPC)}")
-    monkeypatch.setattr(rippleb.jobs, "store", full)
+    monkeypatch.setattr(rippleb.engine.jobs, "store", full)
     frame = rippleb.run(methods="raw", scenarios="creep", seeds=1, out=tmp_path)
     assert frame.loc[0, "status"] == "error" and frame.loc[0, "message"].startswith("environment: ")
     assert "No space left on device" in frame.loc[0, "message"]
-    monkeypatch.setattr(rippleb.jobs, "store", real_store)   # the disk has room again
+    monkeypatch.setattr(rippleb.engine.jobs, "store", real_store)   # the disk has room again
     with pytest.warns(RunWarning, match="environmental reason"):
         again = rippleb.run(methods="raw", scenarios="creep", seeds=1, out=tmp_path, resume=True)
     assert list(again.status) == ["ok"]

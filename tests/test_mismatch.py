@@ -12,13 +12,13 @@ from hypothesis import strategies as st
 import rippleb  # noqa: F401  (before numpy users: the portable numeric paths)
 from rippleb import InputError, simulate
 from rippleb.mismatch import KNOB_BY_NAME, KNOBS, REALISTIC, Unmodelled
-from rippleb.rows import scenario_hash
+from rippleb.engine.rows import scenario_hash
 from rippleb.scenario import load_scenario, scenario_from_dict
 from rippleb.simulator import controller, daq, gauge
 from rippleb.simulator.conditions import CONDITIONS, calibration_condition
 from rippleb.simulator.encoder import EncoderErrors, counts
 from rippleb.simulator.sensors import STRAIN_BITS, STRAIN_RANGE
-from rippleb.sweep import PARAMS, swept_scenario
+from rippleb.engine.sweep import PARAMS, swept_scenario
 
 CPR = 2500
 

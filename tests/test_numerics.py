@@ -12,7 +12,7 @@ import sys
 import pytest
 
 from rippleb import numerics
-from rippleb.tables import ACCURACY_COLUMNS
+from rippleb.report.tables import ACCURACY_COLUMNS
 
 #: Variables a case may set; removed from the parent's environment first, so each case
 #: starts as a fresh shell would.
@@ -69,7 +69,7 @@ def test_machine_names_what_decides_the_last_bits():
 ROW = """
 import json, sys, tempfile, pathlib
 import rippleb
-from rippleb import report
+from rippleb.report import writer as report
 rows = {}
 with tempfile.TemporaryDirectory() as d:
     for i, (method, scenario, condition, seed) in enumerate(json.loads(sys.argv[1])):

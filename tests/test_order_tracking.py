@@ -278,7 +278,7 @@ def _simulation(scenario, seed):
 def _scores(cls, scenario, seed):
     """The runner's result columns of one method on one scenario and seed (cached)."""
     from rippleb.metrics import Truth
-    from rippleb.runner import evaluate
+    from rippleb.engine.runner import evaluate
 
     sim = _simulation(scenario, seed)
     row = evaluate(cls, _simulation("calibration", seed).log, sim.log, Truth.from_simulation(sim))

@@ -167,7 +167,7 @@ def test_load_table_matches_rnea():
 
 
 def test_fig2_replica_is_written_as_png(tmp_path):
-    from rippleb.figures import plot_order_spectra, speed_spectra
+    from rippleb.report.figures import plot_order_spectra, speed_spectra
 
     out = plot_order_spectra(tmp_path / "fig2.png", seed=0, speeds=(1.0, 4.0), revolutions=4)
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

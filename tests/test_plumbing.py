@@ -142,7 +142,7 @@ def test_without_a_mount_namespace_the_plumbing_stays_closed(tmp_path, monkeypat
     """A kernel that refuses the mount namespace: the worker sees the host's processes, but
     every rippleb process (runner, fork server, keepers) is not dumpable, so none of their
     descriptors opens; the run directory is still only rippleb's to write, by its rows."""
-    from rippleb import isolation
+    from rippleb.engine import isolation
 
     namespace = {}
     exec(PROBER, namespace)
@@ -189,8 +189,8 @@ def test_garbage_in_the_control_pipe_ends_that_job_only(monkeypatch, garbage):
     own job as ``garbled``, never the pool; a plain job beside it is done."""
     import functools
 
-    from rippleb import isolation
-    from rippleb.pool import Pool
+    from rippleb.engine import isolation
+    from rippleb.engine.pool import Pool
 
     monkeypatch.setattr(isolation, "NAMESPACE_CHOICES", ())   # the kernel refuses namespaces
     pool = Pool(2)
@@ -211,7 +211,7 @@ def test_the_control_parser_never_raises_and_reads_only_what_a_keeper_writes():
     from hypothesis import given
     from hypothesis import strategies as st
 
-    from rippleb.pool import control
+    from rippleb.engine.pool import control
 
     @given(st.binary(max_size=40))
     def anything(data):

@@ -25,7 +25,7 @@ import pytest
 
 import rippleb
 from conftest import off_lock
-from rippleb import report
+from rippleb.report import writer as report
 from rippleb.simulator.conditions import CONDITIONS
 from rippleb.registry import Registry
 from rippleb.scenario import scored_scenarios
@@ -93,7 +93,7 @@ def test_published_rows_are_reproduced(tmp_path):
 def test_the_published_run_used_the_locked_versions_and_portable_paths():
     """constraints.txt must name the versions results/ was made with, or the bit-exact
     check above would compare against the wrong environment."""
-    from rippleb.provenance import NUMBER_PRODUCERS
+    from rippleb.report.provenance import NUMBER_PRODUCERS
 
     run = json.loads((RESULTS / "provenance.json").read_text())["run"]
     assert run["machine"]["numerics"] == "portable"

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from rippleb import figures, report, tables
+from rippleb.report import figures, tables, writer as report
 from rippleb.cli import main
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -34,7 +34,7 @@ def test_t_interval_of_known_values():
 def test_t_quantile_is_scipy_stats_t_ppf_exactly():
     from scipy import stats
 
-    from rippleb.stats import t_quantile
+    from rippleb.report.stats import t_quantile
 
     for p in (0.9, 0.95, 0.975, 0.995):
         for dof in (1, 2, 4, 19, 99):
@@ -434,7 +434,7 @@ def test_the_report_says_how_timing_was_taken():
 
 
 def test_a_dirty_build_is_told_from_a_dev_version():
-    from rippleb.provenance import built_dirty
+    from rippleb.report.provenance import built_dirty
 
     assert not built_dirty("0.1.1.dev79+gf4de4a038")
     assert built_dirty("0.1.1.dev79+gf4de4a038.d20261122")

@@ -9,8 +9,8 @@ import pytest
 
 import rippleb
 from rippleb import InputError, JointSpec, Method, make_log
-from rippleb import runner as runner_mod
-from rippleb.results import COLUMNS
+from rippleb.engine import runner as runner_mod
+from rippleb.engine.results import COLUMNS
 
 N = 4000  # 0.2 s at 20 kHz: 200 ticks
 

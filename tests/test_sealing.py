@@ -23,7 +23,8 @@ import pandas as pd
 import pytest
 
 import rippleb
-from rippleb import Method, sealing
+from rippleb import Method
+from rippleb.engine import sealing
 from rippleb.cli import main
 from test_bad_input import _dist  # a minimal installed distribution without pip
 
@@ -297,7 +298,7 @@ def test_the_seeker_finds_what_a_naive_design_would_leak(tmp_path, monkeypatch, 
     seeds of simulation jobs sent through the server lie in its *freed* memory, which a later
     allocation may overwrite before a row forks: found in most runs, not all (CI once missed
     it in one run), so that design gets up to three runs and must leak in one."""
-    from rippleb import scheduler
+    from rippleb.engine import scheduler
 
     if design == "salt-drawn-before-the-fork":
         early = MARK + os.urandom(sealing.SALT_BYTES - len(MARK))

@@ -23,9 +23,11 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from rippleb import cli, forkserver, interrupts, isolation
-from rippleb.forkserver import ForkServer
-from rippleb.pool import Pool
+from rippleb import interrupts
+from rippleb.cli import program as cli
+from rippleb.engine import forkserver, isolation
+from rippleb.engine.forkserver import ForkServer
+from rippleb.engine.pool import Pool
 
 ROOT = Path(__file__).resolve().parents[1]
 _spec = importlib.util.spec_from_file_location("signal_trials", ROOT / "benchmarks" / "signal_trials.py")
@@ -50,7 +52,7 @@ def python(code: str, *args, cwd=None, env=None) -> subprocess.CompletedProcess:
 #: its worker, keeper, the fork server and the runner waiting for ever.
 SIGNAL_IN_SUBMIT = """
 import os, signal, sys, time
-from rippleb import forkserver
+from rippleb.engine import forkserver
 real = forkserver.ForkServer.spawn
 def spawn(self, job, *args, **kwargs):
     pid = real(self, job, *args, **kwargs)
@@ -108,7 +110,7 @@ def big_result():
 
 
 def test_a_keeper_ends_its_worker_once_the_runner_stops_listening():
-    from rippleb.keeper import keeper
+    from rippleb.engine.keeper import keeper
 
     result_r, result_w = os.pipe()
     ctrl_r, ctrl_w = os.pipe()
@@ -174,7 +176,7 @@ def test_an_interrupt_while_the_command_starts_is_one_line(monkeypatch, capsys):
 
 SIGTERM_IN_START_UP = """
 import os, signal, sys
-import rippleb.cli as cli
+import rippleb.cli.program as cli
 real = cli.build_parser
 def build():
     os.kill(os.getpid(), signal.SIGTERM)
@@ -195,7 +197,7 @@ def test_sigterm_while_the_command_starts_is_one_line_and_status_130():
 #: ``PyRun_String``, e.g. numpy's import, happens to clear it).
 INTERRUPTED_EXEC = """
 import ctypes, sys
-import rippleb.cli as cli
+import rippleb.cli.program as cli
 real = cli.build_parser
 def build():
     parser = real()
@@ -282,7 +284,7 @@ def test_recording_the_git_state_never_takes_git_s_index_lock(tmp_path):
     """A run records its checkout's git state as it starts. ``git status`` rewrites a stale
     index under ``.git/index.lock``; an interrupt meanwhile killed it and left the lock, and
     the user's next ``git commit`` failed. The index must be left as it was."""
-    from rippleb.provenance import git_state
+    from rippleb.report.provenance import git_state
 
     def git(*args):
         subprocess.run(["git", "-C", tmp_path, "-c", "user.email=t@t", "-c", "user.name=t", *args],

@@ -3,7 +3,7 @@
 import pytest
 
 from rippleb.errors import InputError
-from rippleb.sweep import PARAMS, apply, grid, parse_params, swept_scenario
+from rippleb.engine.sweep import PARAMS, apply, grid, parse_params, swept_scenario
 
 
 def test_parse_and_grid_cover_every_combination_in_order():
@@ -66,7 +66,7 @@ def test_ripple_drift_is_swept_into_the_ripple_table():
 
 
 def test_ripple_drift_without_the_aged_condition_is_refused():
-    from rippleb.sweep import run_sweep
+    from rippleb.engine.sweep import run_sweep
 
     with pytest.raises(InputError, match=r"ripple\.drift: acts only under the 'aged' condition"):
         run_sweep(["ripple.drift=0,1"], methods="raw", scenarios="paper-quintic", seeds=1,

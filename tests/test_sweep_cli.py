@@ -10,10 +10,10 @@ import tomllib
 import pandas as pd
 import pytest
 
-from rippleb.rows import scenario_hash
-from rippleb.scenario import _Parser
+from rippleb.engine.rows import scenario_hash
+from rippleb.scenario import Parser
 
-from rippleb.sweep_report import figures, points
+from rippleb.report.sweep_report import figures, points
 
 BIN = Path(sys.executable).parent
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,7 +38,7 @@ def test_sweep_rows_equal_runs_of_files_with_the_value_resume_and_figure(tmp_pat
     text = (ROOT / "scenarios" / "paper-quintic.toml").read_text()
     hot = text.replace("temperature_c = 40.0", "temperature_c = 60.0")
     assert hot != text
-    scenario = _Parser(Path("hot.toml"), "paper-quintic").scenario(tomllib.loads(hot))
+    scenario = Parser(Path("hot.toml"), "paper-quintic").scenario(tomllib.loads(hot))
     swept = frame[frame["temperature_c"] == 60.0]
     assert set(swept["scenario_sha256"]) == {scenario_hash(scenario)}
     assert frame["scenario_sha256"].nunique() == 2
@@ -69,7 +69,7 @@ def test_sweep_rows_equal_runs_of_files_with_the_value_resume_and_figure(tmp_pat
 
 
 def test_sweep_help_lists_every_parameter_with_its_range():
-    from rippleb.sweep import PARAMS
+    from rippleb.engine.sweep import PARAMS
 
     text = rippleb("sweep", "--help").stdout
     for param in PARAMS.values():

@@ -84,7 +84,7 @@ def test_the_bounds_of_a_move_are_exact_and_leave_the_built_ins_alone():
         speed, accel = validity.segment_peaks(seg)
         assert np.abs(qd).max() == pytest.approx(speed, rel=1e-6, abs=1e-12)
         assert np.abs(qdd).max() == pytest.approx(accel, rel=1e-4, abs=1e-12)
-    from rippleb.checks import check_scenario
+    from rippleb.engine.checks import check_scenario
 
     for name in scored_scenarios() + ["calibration"]:
         check_scenario(load_scenario(name))
@@ -162,9 +162,9 @@ def test_an_unphysical_calibration_log_invalidates_its_rows(monkeypatch):
 def test_a_dask_worker_remembers_that_a_case_is_unphysical(tmp_path, monkeypatch):
     """The second row of a case on one worker takes the case from the worker's memo; it
     must take its verdict along."""
-    from rippleb.executors import RowTask, run_task
+    from rippleb.engine.executors import RowTask, run_task
     from rippleb.registry import Registry
-    from rippleb.rows import RowKey
+    from rippleb.engine.rows import RowKey
 
     monkeypatch.setattr(validity, "check_simulation", lambda sim: "a test says so")
     memo, registry = {}, Registry.discover()

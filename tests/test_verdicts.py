@@ -4,8 +4,8 @@ import itertools
 
 import pandas as pd
 
-from rippleb.tables import condition_summary_markdown
-from rippleb.verdicts import MECHANISMS, method_verdicts
+from rippleb.report.tables import condition_summary_markdown
+from rippleb.report.verdicts import MECHANISMS, method_verdicts
 
 
 def _frame(errors: dict) -> pd.DataFrame:

@@ -3,11 +3,11 @@
 Two checks, each bound with its source here and in ``docs/physics.md`` ("Physical validity"):
 
 * :func:`check_bounds` and :func:`check_motion`, before anything runs (``rippleb run``,
-  ``sweep`` and ``simulate`` call them through :func:`rippleb.checks.check_scenario`): a
+  ``sweep`` and ``simulate`` call them through :func:`rippleb.engine.checks.check_scenario`): a
   scenario that asks for what the joint cannot do is refused with one line naming its file
   and field: more segments or loads than a scenario is meant to hold, a held joint outside
   its limits, loads beyond the drive's peak torque, a move too fast for the motor.
-* :func:`check_simulation`, once per simulated log (:func:`rippleb.jobs.simulate_case`):
+* :func:`check_simulation`, once per simulated log (:func:`rippleb.engine.jobs.simulate_case`):
   a log whose true torque leaves the drive's repeated peak torque, or whose strain clips at
   the ADC, is not a joint that exists (a closed loop that went unstable, e.g. at a 100 Hz
   control rate); every row scored on it, or calibrated on it, is ``invalid`` with the reason.
@@ -138,7 +138,7 @@ def check_motion(scenario, model) -> None:
     """Refuse a segment whose exact peak speed exceeds the joint's URDF velocity limit, or
     whose peak acceleration exceeds what the motor gives at its current limit.
 
-    The sampled trajectory check (:func:`rippleb.rows.check_trajectory`) can step over a
+    The sampled trajectory check (:func:`rippleb.engine.rows.check_trajectory`) can step over a
     short segment (a move of 1e-300 s has no sample); the peaks here come from the
     segment's formula. Arguments and error as :func:`check_bounds`.
     """

@@ -1,0 +1,132 @@
+"""``rippleb list``: every method, scenario and deployment condition, one line each.
+
+The parser (:mod:`rippleb.cli.program`) calls :func:`add_list`.
+Plugins are imported only in isolated children (:func:`probe_plugins`), each under a timeout.
+"""
+
+from __future__ import annotations
+
+import os
+
+from rippleb.cli.options import limit
+from rippleb.errors import RipplebError
+
+PLUGIN_IMPORT_TIMEOUT_S = 20.0
+
+
+def add_list(sub) -> None:
+    p = sub.add_parser("list", help="list methods, scenarios and deployment conditions, one line each",
+                       description="List every method with its origin (builtin, plugin, or broken "
+                                   "with its import error) and what it does (the first line of its "
+                                   "docstring), every built-in scenario with whether it is scored and "
+                                   "what it tests (the first sentence of its description), and the "
+                                   "deployment conditions. Plugins are imported in a child "
+                                   "process, each under a timeout.")
+    p.add_argument("--import-timeout", type=float, default=PLUGIN_IMPORT_TIMEOUT_S, metavar="S",
+                   help=f"seconds a plugin may take to import (default {PLUGIN_IMPORT_TIMEOUT_S:g})")
+    p.set_defaults(func=cmd_list)
+
+
+#: ``rippleb list`` fits a terminal this wide; longer descriptions wrap.
+LIST_WIDTH = 100
+
+
+def cmd_list(args) -> int:
+    """``rippleb list``."""
+    from rippleb.registry import Registry
+    from rippleb.scenario import builtin_scenarios, load_scenario
+    from rippleb.simulator.conditions import CONDITIONS
+
+    registry = Registry.discover()
+    timeout = limit("--import-timeout", args.import_timeout) or None
+    errors, docs = probe_plugins(registry, timeout)
+    print("methods:")
+    for name in registry.names():
+        entry = registry.entries[name]
+        error = entry.error or errors.get(name)
+        if error:
+            print(f"  {name:<28} {'broken':<10} {entry.source}  {error}")
+            continue
+        # a built-in's docstring is read from its source: importing every method family
+        # (numba kernels compiled on a fresh install) would make `list` take seconds
+        about = first_line(entry.doc) if entry.origin == "builtin" else docs.get(name, "")
+        print(_fit(f"  {name:<28} {entry.origin:<10} {about or entry.source}"))
+    for module, error in sorted(registry.broken_modules.items()):
+        print(f"  {'?':<28} {'broken':<8} {module}  {error}")
+    print("scenarios:")
+    for name in builtin_scenarios():
+        try:
+            scenario = load_scenario(name)
+        except RipplebError as exc:
+            print(f"  {name:<28} broken      {exc}")
+            continue
+        scored = "scored" if scenario.scored else "not scored"
+        print(_fit(f"  {name:<28} {scored:<10} {first_sentence(scenario.description)}"))
+    print("conditions (what happened between calibration and scoring):")
+    for name, text in CONDITIONS.items():
+        print(_fit(f"  {name:<28} {'':<10} {text}"))
+    return 0
+
+
+def first_line(doc: str | None) -> str:
+    """The first non-empty line of a docstring, without reST markup."""
+    lines = [line.strip() for line in (doc or "").strip().splitlines() if line.strip()]
+    return lines[0].replace("``", "") if lines else ""
+
+
+#: Words ending in a full stop that do not end a sentence.
+_ABBREVIATIONS = ("Fig", "Figs", "Sec", "Eq", "e.g", "i.e", "al", "approx", "cf")
+
+
+def first_sentence(text: str) -> str:
+    """The first sentence of ``text`` on one line (a full stop after an abbreviation such
+    as "Fig." does not end it)."""
+    import re
+
+    flat = " ".join(text.split())
+    for match in re.finditer(r"\.\s", flat):
+        word = flat[: match.start()].rsplit(" ", 1)[-1]
+        if word not in _ABBREVIATIONS:
+            return flat[: match.start() + 1]
+    return flat
+
+
+def _fit(line: str) -> str:
+    """``line`` wrapped at :data:`LIST_WIDTH`, continuation lines under the description."""
+    import textwrap
+
+    indent = " " * 42  # under the description: 2 + 28 + 1 + 10 + 1
+    return textwrap.fill(line, LIST_WIDTH, subsequent_indent=indent, break_on_hyphens=False)
+
+
+def probe_plugins(registry, timeout: float) -> tuple[dict[str, str], dict[str, str]]:
+    """Import every plugin in its own isolated child, under ``timeout`` seconds each;
+    return ``{name: one-line error}`` of those that failed and ``{name: first docstring
+    line}`` of those that loaded. The parent never runs plugin code, so a plugin that
+    hangs or exits at import delays only itself."""
+    from rippleb.errors import PluginError
+    from rippleb.engine.pool import Pool
+
+    def job(entry):
+        def load():
+            return first_line(entry.load().__doc__).encode()
+        return load
+
+    plugins = [name for name in registry.names("plugin") if not registry.entries[name].broken]
+    pool, errors, docs = Pool(max(1, min(len(plugins), os.cpu_count() or 1))), {}, {}
+    pending = list(plugins)
+    while pending or pool.busy:
+        while pending and pool.free:
+            name = pending.pop(0)
+            pool.submit(name, job(registry.entries[name]), timeout, confine=())
+        for fin in pool.wait():
+            if fin.kind == "done":
+                docs[fin.key] = bytes(fin.value).decode(errors="replace")
+            elif fin.kind == "raised":
+                errors[fin.key] = fin.value.split("is broken: ", 1)[-1] if PluginError.__name__ in fin.value \
+                    else fin.value
+            elif fin.kind == "timeout":
+                errors[fin.key] = f"TimeoutError: import took longer than {timeout:g} s (--import-timeout)"
+            elif fin.kind != "done":
+                errors[fin.key] = f"import ended the process (exit code {fin.value})"
+    return errors, docs

@@ -1,0 +1,214 @@
+"""``rippleb run``: methods on scenarios (or a recorded log), rows to ``DIR/results.csv``.
+
+Also what every command that runs rows shares (``run`` and ``sweep``): :func:`recorded`
+writes the run's provenance however it ends, and :func:`report_broken_plugins` says which
+requested plugins could not be imported.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+from rippleb.cli.options import add_executor_options, add_seal_options, check_run_options, executor, limit
+from rippleb.errors import InputError
+
+
+def add_run(sub) -> None:
+    from rippleb.engine.runner import DEFAULT_MEMORY_MB, DEFAULT_SEEDS, DEFAULT_TIMEOUT_S
+
+    p = sub.add_parser(
+        "run", help="run methods on scenarios (or a recorded log) and write results.csv",
+        description="Run every method on every scenario and seed, causally, one control tick at a "
+                    "time, and write one row per method x scenario x seed to DIR/results.csv as it "
+                    "finishes. Defaults: every built-in method, every scored built-in scenario, "
+                    f"{DEFAULT_SEEDS} seeds, out runs/<timestamp>/.")
+    p.add_argument("--methods", help="comma-separated method names, or 'all' to add plugins "
+                                     "(default: every built-in method)")
+    p.add_argument("--scenarios", help="comma-separated scenario names or paths to .toml files "
+                                       "(default: every scored built-in scenario)")
+    p.add_argument("--conditions", metavar="A,B|all",
+                   help="comma-separated deployment conditions, or 'all' (default: same-session, the "
+                        "most favourable; see 'rippleb list')")
+    p.add_argument("--seeds", type=int, help=f"number of seeds, i.e. simulated devices (default {DEFAULT_SEEDS})")
+    p.add_argument("--seed-start", type=int, help="first seed (default 0)")
+    p.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                   help="rows run in parallel processes (default: the number of CPUs, "
+                        f"{os.cpu_count()} here; use 1 for the least noisy timings)")
+    p.add_argument("--out", type=Path, help="output directory, new or empty (default runs/<timestamp>/)")
+    p.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT_S,
+                   help=f"seconds one row may take before it is killed (default {DEFAULT_TIMEOUT_S:g}; 0: none)")
+    p.add_argument("--memory-limit", type=float, default=DEFAULT_MEMORY_MB, metavar="MB",
+                   help=f"memory one row may allocate, in MB (default {DEFAULT_MEMORY_MB:g}; 0: none)")
+    p.add_argument("--resume", type=Path, metavar="DIR",
+                   help="finish an interrupted run with the selection in DIR/run.json: run the rows "
+                        "missing from DIR/results.csv and those that failed for an environmental "
+                        "reason (disk full, killed)")
+    p.add_argument("--log", type=Path, help="run on a recorded log (.csv or .parquet) instead of scenarios")
+    p.add_argument("--calibration", type=Path,
+                   help="with --log: the calibration log (needs torque_ref); default: the log itself, "
+                        "with a warning: a scored log is not a calibration recording, and fits some "
+                        "methods worse or not at all")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_executor_options(p)
+    add_seal_options(p)
+    p.set_defaults(func=cmd_run)
+
+
+def cmd_run(args) -> int:
+    """``rippleb run``."""
+    return recorded(args, _run)
+
+
+def recorded(args, body) -> int:
+    """Run ``body(args, start)`` (a run or a sweep) and record its provenance, with whether
+    it completed, in the run directory however it ends."""
+    from rippleb.report.provenance import collect_provenance
+    from rippleb.engine.sealing import redact
+
+    start = time.perf_counter()
+    provenance = collect_provenance(redact(args.argv))  # no pointer to a salt file in the run directory
+    completed = False
+    try:
+        status = body(args, start)
+        completed = True
+        return status
+    finally:
+        provenance["completed"] = completed
+        _record_run(args, provenance, time.perf_counter() - start)
+
+
+def _record_run(args, provenance: dict, wall_s: float) -> None:
+    """Write DIR/provenance.json (command, code version, software, wall time) for
+    ``rippleb report``; a resumed run keeps the first command and adds its own."""
+    import json
+
+    from rippleb.report.provenance import environment_changes
+
+    out_dir = getattr(args, "out_dir", None)
+    if out_dir is None or not getattr(args, "started", False):
+        return  # the run never started (bad arguments, a refused directory): nothing to describe
+    path = out_dir / "provenance.json"
+    provenance.update(jobs=args.jobs, wall_s=wall_s, finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
+    if args.resume is not None and path.is_file():
+        try:
+            first = json.loads(path.read_text())
+        except (OSError, ValueError):
+            first = {}
+        first.setdefault("resumes", []).append(provenance["command"])
+        changes = environment_changes(first, provenance)
+        if changes:
+            portable = all((p.get("machine") or {}).get("numerics") == "portable" for p in (first, provenance))
+            first.setdefault("environment_changes", []).append(
+                {"command": provenance["command"], "changes": changes, "portable": portable})
+        first["wall_s"] = first.get("wall_s", 0.0) + wall_s
+        first["completed"] = provenance["completed"]
+        provenance = first
+    try:
+        path.write_text(json.dumps(provenance, indent=1) + "\n")
+    except OSError as exc:
+        print(f"rippleb: warning: cannot record {path}: {exc.strerror or exc}", file=sys.stderr)
+
+
+def _run(args, start: float) -> int:
+    from rippleb.engine import runner
+
+    check_run_options(args)
+    timeout = limit("--timeout", args.timeout)
+    memory = limit("--memory-limit", args.memory_limit)
+    for flag, value in (("--methods", args.methods), ("--scenarios", args.scenarios),
+                        ("--conditions", args.conditions)):
+        if value is not None and not value.replace(",", "").strip():
+            raise InputError(f"{flag} is empty; leave it out for the default")
+    progress = False if args.no_progress else None
+
+    def started():
+        args.started = True
+    if args.log is not None:
+        _refuse_with_log(args)
+        executor(args)  # refuses dask with --log
+        args.out_dir = args.out or runner.default_out_dir()
+        frame = runner.run_log(args.log, args.calibration, args.methods, jobs=args.jobs,
+                               out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress,
+                               on_start=started)
+        if args.calibration is None:
+            print("rippleb: warning: no --calibration: each method was fitted on the scored log "
+                  "itself, not on a calibration recording; a log without motion both ways, a range "
+                  "of speeds and known loads fits some methods worse than a calibration recording "
+                  "would, or not at all, so these rows are no fair comparison; pass --calibration "
+                  "FILE, e.g. one written by 'rippleb simulate calibration'", file=sys.stderr)
+    elif args.resume is not None:
+        config = runner.read_config(args.resume)
+        args.out_dir = args.resume
+        _warn_other_environment(args.resume)
+        seeds = config["seeds"] if args.seeds is None and args.seed_start is None \
+            else (runner.DEFAULT_SEEDS if args.seeds is None else args.seeds)
+        frame = runner.run(args.methods or config["methods"], args.scenarios or config["scenarios"],
+                           seeds, conditions=args.conditions or config.get("conditions"),
+                           seed_start=args.seed_start or 0, jobs=args.jobs, out=args.resume,
+                           timeout=timeout, memory_mb=memory, resume=True, progress=progress,
+                           on_start=started, executor=executor(args), salt_file=args.salt_file)
+    else:
+        if args.calibration is not None:
+            raise InputError("--calibration only applies with --log")
+        args.out_dir = args.out or runner.default_out_dir()
+        frame = runner.run(args.methods, args.scenarios,
+                           runner.DEFAULT_SEEDS if args.seeds is None else args.seeds,
+                           conditions=args.conditions, seed_start=args.seed_start or 0, jobs=args.jobs,
+                           out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress,
+                           on_start=started, executor=executor(args), sealed=args.sealed)
+    from rippleb.report.tables import summary_text
+
+    print(summary_text(frame))
+    counts = frame["status"].value_counts().to_dict() if len(frame) else {}
+    print(f"\n{len(frame)} rows ({', '.join(f'{v} {k}' for k, v in counts.items()) or 'none'}) "
+          f"in {args.out_dir / 'results.csv'}; total wall time {time.perf_counter() - start:.1f} s")
+    print(f"Next: rippleb report {args.out_dir} (tables with intervals, figures; --html for the "
+          f"interactive page)")
+    return report_broken_plugins(frame)
+
+
+def _warn_other_environment(run_dir: Path) -> None:
+    """One line when ``run_dir``'s rows were made with other versions or numeric paths."""
+    from rippleb.report.provenance import environment, environment_changes, read_run_provenance
+
+    try:
+        first = read_run_provenance(run_dir)
+    except InputError:
+        return  # --resume reports an unreadable run directory itself
+    if "versions" not in first:
+        return  # recorded before versions were: nothing to compare
+    changes = environment_changes(first, environment())
+    if changes:
+        print(f"rippleb: warning: {run_dir} was started with other versions or numeric paths "
+              f"({'; '.join(changes)}); the new rows may differ from the old in their last bits",
+              file=sys.stderr)
+
+
+def report_broken_plugins(frame) -> int:
+    """One stderr line per requested plugin that failed to import; exit 1 if any.
+
+    Its rows are kept with status ``error`` and the other methods ran (docs/design.md), but a
+    run asked to include a method it could not load is not a clean run. Judged from the rows
+    (every row of the method failed to import it): the CLI never imports plugin code itself.
+    """
+    broken = 0
+    if not len(frame):
+        return 0
+    for name, rows in frame.groupby("method"):
+        messages = rows["message"].astype(str)
+        failed = messages[messages.str.startswith("PluginError: ")]
+        if len(failed) == len(rows):
+            print(f"rippleb: error: {failed.iloc[0][len('PluginError: '):]}", file=sys.stderr)
+            broken += 1
+    return 1 if broken else 0
+
+
+def _refuse_with_log(args) -> None:
+    for flag, value in (("--scenarios", args.scenarios), ("--conditions", args.conditions),
+                        ("--seeds", args.seeds),
+                        ("--seed-start", args.seed_start), ("--resume", args.resume)):
+        if value is not None:
+            raise InputError(f"{flag} does not apply with --log")

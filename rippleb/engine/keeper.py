@@ -1,0 +1,192 @@
+"""The two processes of a job: the *keeper* (rippleb's code) and the *worker* it forks.
+
+:class:`rippleb.engine.pool.Pool` (or the fork server, :mod:`rippleb.engine.forkserver`) forks a keeper
+per job; the keeper takes a new session and PID namespace, becomes a child subreaper and
+forks the worker, which runs the job with a memory limit, with every inherited file
+descriptor closed but its result pipe, and with its output going to a file
+(:mod:`rippleb.engine.isolation` says why each step). The keeper reports the worker's PID and,
+when it has ended and everything it started is gone, its exit code, on the control pipe.
+
+The keeper never waits blindly: it watches its end of the control pipe while it waits for
+the worker, and if the runner closes its end (interrupted, or gone) it ends the worker at
+once. A worker blocked writing its result into a pipe nobody reads would otherwise keep
+its keeper, the fork server and the runner waiting for ever (issue 25).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import gc
+import os
+import resource
+import select
+import signal
+import sys
+import traceback
+
+from rippleb import integrity
+from rippleb.engine import isolation
+from rippleb.registry import one_line
+
+
+def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output, confine=None) -> None:
+    """rippleb's own process between the runner and a job: session, namespaces, cleanup.
+    Runs ``fn()`` in a worker it forks; never returns.
+
+    ``confine`` is None for rippleb's own jobs (simulations), else the directories a
+    method's worker must not write (:func:`rippleb.engine.isolation.confine_files`)."""
+    try:
+        # First: Ctrl-C reaches the runner's whole process group, and what is inherited
+        # from the runner until here is its handler (the runner decides what a signal ends).
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        _keep_inherited_pages_shared()
+        os.setsid()
+        isolation.close_fds_except(result_w, ctrl_w)
+        isolation.not_dumpable()   # its descriptors (the control pipe) out of the worker's reach
+        isolated, own_mounts = isolation.new_namespaces()
+        isolation.become_subreaper()
+        worker = os.fork()
+        if worker == 0:
+            # Its own process group: a worker that signals "its" group (killpg(0, ...), or
+            # kill(0, ...), which is what kill(getppid()) becomes inside a PID namespace)
+            # must not reach the keeper, whose death would lose the row it reports.
+            os.setpgid(0, 0)
+            os.close(ctrl_w)
+            _worker(fn, result_w, memory_mb, output, confine if isolated and own_mounts else None,
+                    confine is not None)  # never returns
+        os.close(result_w)
+        _write_all(ctrl_w, f"{worker} {int(isolated)}\n".encode())
+        status = _wait_worker(worker, ctrl_w)
+        if isolated:  # the kernel ended the namespace with its first process: nothing left to hunt
+            isolation.reap_exited()
+        else:
+            isolation.end_descendants()
+        _write_all(ctrl_w, f"{os.waitstatus_to_exitcode(status)}\n".encode())
+    finally:
+        os._exit(0)
+
+
+def _wait_worker(worker: int, ctrl_w: int) -> int:
+    """Wait for ``worker`` to end and return its wait status; end it at once if the runner
+    closes its end of the control pipe (``POLLERR`` on ours), i.e. no one will read what
+    the worker sends, nor wait for it.
+
+    Where the kernel has no process file descriptors (``pidfd_open``, Linux 5.3) this is a
+    plain ``waitpid``: the runner and the fork server still end the keeper themselves.
+    """
+    try:
+        pidfd = os.pidfd_open(worker)
+    except (AttributeError, OSError):
+        return os.waitpid(worker, 0)[1]
+    watch = select.poll()
+    watch.register(pidfd, select.POLLIN)
+    watch.register(ctrl_w, 0)  # only errors: POLLERR once the reading end is closed
+    try:
+        while True:
+            pid, status = os.waitpid(worker, os.WNOHANG)
+            if pid:
+                return status
+            if any(fd == ctrl_w for fd, _ in watch.poll()):
+                watch.unregister(ctrl_w)
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(worker, signal.SIGKILL)
+    finally:
+        os.close(pidfd)
+
+
+def _worker(fn, result_w: int, memory_mb, output, confine, untrusted: bool) -> None:
+    message = b"R" + b"worker did not start"
+    try:
+        _keep_inherited_pages_shared()
+        isolation.die_with_parent()
+        isolation.close_fds_except(result_w)
+        _redirect_output(output)
+        if untrusted:
+            _confine(confine)
+        _limit_memory(memory_mb)
+        try:
+            payload = fn()
+            message = b"D" + bytes(payload)
+        except BaseException as exc:  # everything a plugin can raise becomes a row status
+            traceback.print_exc()
+            message = b"R" + one_line(exc).encode()
+        _write_all(result_w, message)
+        os.close(result_w)
+        sys.stdout.flush()
+        sys.stderr.flush()
+    finally:
+        # Skip the parent's atexit handlers and buffered files (pytest, tqdm) in the child.
+        os._exit(0)
+
+
+def _confine(read_only) -> None:
+    """Close what the kernel lets a method's worker close off (docs/robustness.md); say on
+    its own log what it could not, so a reader of the row's log knows the run was open."""
+    missing = (["a mount namespace"] if read_only is None
+               else isolation.confine_files(read_only, hidden_files=[integrity.key_path()]))
+    if missing:
+        print(f"rippleb: this worker is not confined: no {', no '.join(missing)} (the kernel refused)",
+              file=sys.stderr)
+
+
+def _keep_inherited_pages_shared() -> None:
+    """Exclude every object inherited from the runner from this process's garbage
+    collections: a collection writes to each object it visits, and so would copy, page by
+    page, the whole runner's heap that the fork shares (tens of milliseconds per job)."""
+    gc.freeze()
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        try:
+            n = os.write(fd, view)
+        except InterruptedError:
+            continue
+        except OSError as exc:
+            if exc.errno == errno.EPIPE:
+                return
+            raise
+        view = view[n:]
+
+
+def _redirect_output(path: str | None) -> None:
+    null = os.open(os.devnull, os.O_RDONLY)
+    os.dup2(null, 0)
+    os.close(null)
+    fd = os.open(path or os.devnull, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    os.dup2(fd, 1)
+    os.dup2(fd, 2)
+    os.close(fd)
+    # sys.stdout/stderr may be wrappers that bypass fds 1 and 2 (pytest, IDEs): rebind them.
+    sys.stdout = open(1, "w", buffering=1, closefd=False)
+    sys.stderr = open(2, "w", buffering=1, closefd=False)
+
+
+def _limit_memory(memory_mb: float | None) -> None:
+    """Cap the address space at what the worker inherited plus ``memory_mb``.
+
+    RLIMIT_AS counts the mappings inherited from the parent (numpy, scipy, Pinocchio
+    and their thread stacks reserve much address space), so an absolute cap would be
+    meaningless; the cap is relative to the size at fork time.
+
+    Both the soft and the hard limit are set: an unprivileged process may raise its soft
+    limit up to its hard one, so a soft cap alone is one ``setrlimit`` call away from
+    gone (issue 25: a plugin lifted it and held 1.5 GiB under ``--memory-limit 200``).
+    Lowering the hard limit cannot be undone without privileges. The call happens only
+    here, in the forked worker: the keeper, the fork server and the runner keep theirs.
+    """
+    if memory_mb is None:
+        return
+    try:
+        with open("/proc/self/statm") as fh:
+            current = int(fh.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+        limit = current + int(memory_mb * 2**20)
+        _, hard = resource.getrlimit(resource.RLIMIT_AS)
+        if hard != resource.RLIM_INFINITY:
+            limit = min(limit, hard)
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+    except (OSError, ValueError):
+        pass  # not Linux: run without a memory limit rather than refuse to run

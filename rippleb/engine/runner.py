@@ -1,0 +1,371 @@
+"""The causal streaming runner: every method x scenario x condition x seed, one isolated process each.
+
+A run has three kinds of jobs (:mod:`rippleb.engine.jobs`), each in its own isolated child of
+:class:`rippleb.engine.pool.Pool`:
+
+* a *simulation* per (scenario content, condition, seed), plus the ``calibration``
+  scenario per seed, simulated under ``same-session`` (it is the device's first
+  session), or under ``realistic`` for that condition's rows (it changes the joint itself:
+  ``conditions.calibration_condition``). It writes what methods may see to hashed cache files and sends the truth
+  back through its pipe; the runner keeps the truth in memory only, and only while rows
+  of that case are pending;
+* a *fit* per method and calibration log: ``fit`` once, as on a real device, and pickle
+  the fitted method into the cache (a method that cannot be pickled is fitted in each row);
+* a *row* per :class:`~rippleb.engine.rows.RowKey`: it verifies its inputs, loads the fitted
+  method, ``reset``s it, streams the scored log in ticks and sends back the estimate and
+  tick times. The runner scores the estimate against the truth it holds.
+
+Each row ends as ``ok``, ``error``, ``invalid`` or ``timeout`` and is written to
+``DIR/results.csv`` as soon as it ends (:class:`rippleb.engine.results.ResultsFile`). A run
+directory is locked while a run writes it, never overwritten without ``resume=True``,
+and always resumable from ``DIR/run.json``: ``resume=True`` validates what it reads,
+and runs the rows missing from ``results.csv`` plus those that failed for an
+environmental reason. See ``docs/robustness.md``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+from rippleb import interrupts
+from rippleb.engine import isolation
+from rippleb.engine import jobs as job_fns
+from rippleb import numerics
+from rippleb.engine import sealing
+from rippleb.engine.cache import digest, log_bytes
+from rippleb.engine.checks import (check_calibration, check_options, check_recording, check_reference, check_scenario,
+                            check_scored_length)
+from rippleb.simulator.conditions import DEFAULT_CONDITION, calibration_condition
+from rippleb.data import SensorLog
+from rippleb.errors import InputError
+from rippleb.engine.forkserver import ForkServer
+from rippleb.metrics import Truth, tick_stats
+from rippleb.engine.pool import Pool
+from rippleb.registry import Registry
+from rippleb.engine.executors import row_tasks
+from rippleb.engine.results import ResultsFile, RunWarning, row_key, say_other_versions
+from rippleb.engine.rows import (CALIBRATION, FITTING, MAX_SEEDS, SCORED, Case, RowKey, scenario_hash,
+                                 select_conditions, select_scenarios, select_seeds, split_names)
+from rippleb.engine.rundir import log_dir, read_config, run_dir
+from rippleb.engine.scheduler import Plan, State, prepare_cases, progress_bar, record, say_retried, schedule
+
+__all__ = ["run", "run_log", "resolve_methods", "read_config", "check_scenario", "evaluate",
+           "default_out_dir", "DEFAULT_SEEDS", "MAX_SEEDS", "DEFAULT_TIMEOUT_S", "DEFAULT_MEMORY_MB"]
+
+DEFAULT_SEEDS = 3
+DEFAULT_TIMEOUT_S = 300.0
+DEFAULT_MEMORY_MB = 4096.0
+
+
+def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, seed_start: int = 0,
+        jobs: int = 1, out=None, timeout: float | None = DEFAULT_TIMEOUT_S,
+        memory_mb: float | None = DEFAULT_MEMORY_MB, resume: bool = False, progress: bool | None = False,
+        on_start=None, executor=None, sealed=None, salt_file=None):
+    """Run methods on simulated scenarios; one row per method x scenario x condition x seed.
+
+    Parameters
+    ----------
+    methods
+        Method names (a list or ``"a,b"``); None for every built-in method, ``"all"`` for
+        every built-in and plugin method.
+    scenarios
+        Scenario names or paths to ``.toml`` files; None for every scored built-in.
+    seeds
+        The number of seeds (devices) ``seed_start .. seed_start + seeds - 1``, or a list of seeds.
+    conditions
+        Deployment conditions (``rippleb.simulator.conditions.CONDITIONS``, a list or ``"a,b"``, or
+        ``"all"``); None for ``same-session`` only.
+    seed_start
+        First seed when ``seeds`` is a number.
+    jobs
+        Rows run at once, each in its own process.
+    out
+        Directory for ``results.csv`` (created; refused if not empty unless ``resume``),
+        or None to keep the rows in memory only.
+    timeout
+        Seconds one job (fit or row) may take before it is killed; None for no limit.
+    memory_mb
+        Address space one job may add [MB] before allocations fail; None for no limit.
+    resume
+        Finish the run in ``out`` (same selection as ``out/run.json``): keep its finished
+        rows, run the missing ones and those that failed for an environmental reason.
+    progress
+        Show a progress bar on stderr (None: only on a terminal).
+    on_start
+        Called once the run directory is checked and locked, before any job starts.
+    executor
+        None for the local forked pool, or an object with ``run(tasks, record)`` that runs
+        whole rows elsewhere (:class:`rippleb.engine.dask_executor.DaskExecutor`).
+    sealed
+        A new sealed run (:mod:`rippleb.engine.sealing`): the path of a new file, outside ``out``,
+        that the secret salt is written to when the run ends; the devices and the noise are
+        drawn from it, ``run.json`` records its commitment and each row gets
+        ``sealed = True``. Needs ``out``; not with an ``executor``.
+    salt_file
+        With ``resume`` of a sealed run: the file ``sealed`` wrote (``"-"``: standard input).
+
+    Returns
+    -------
+    pandas.DataFrame
+        The rows sorted by (method, scenario, condition, seed), standard columns first
+        (see ``rippleb.engine.results.COLUMNS``).
+    """
+    from rippleb.scenario import load_scenario, scored_scenarios
+
+    check_options(jobs=jobs, timeout=timeout, memory_mb=memory_mb)
+    registry = Registry.discover()
+    names = resolve_methods(registry, methods)
+    if scenarios is not None and not split_names(scenarios):
+        raise InputError("--scenarios is empty; give scenario names or .toml paths")
+    given = split_names(scenarios) or scored_scenarios()
+    scenario_objs = select_scenarios(given, load_scenario)
+    for scenario in scenario_objs:
+        check_scenario(scenario)
+    condition_list = select_conditions(conditions)
+    seed_list = select_seeds(seeds, seed_start)
+    calibration = load_scenario(CALIBRATION)
+    config = {"methods": names, "conditions": condition_list, "seeds": seed_list,
+              "scenarios": [str(Path(s).resolve()) if s.endswith(".toml") else s for s in
+                            dict.fromkeys(given)]}
+    return run_resolved(registry, names, [(s, calibration, {}) for s in scenario_objs], condition_list,
+                        seed_list, config=config, jobs=jobs, out=out, timeout=timeout,
+                        memory_mb=memory_mb, resume=resume, progress=progress, on_start=on_start,
+                        executor=executor, sealed=sealed, salt_file=salt_file)
+
+
+def run_resolved(registry: Registry, names: list[str], entries: list[tuple], conditions: list[str],
+                 seeds: list[int], *, config: dict, jobs: int = 1, out=None,
+                 timeout: float | None = DEFAULT_TIMEOUT_S, memory_mb: float | None = DEFAULT_MEMORY_MB,
+                 resume: bool = False, progress: bool | None = False, on_start=None, executor=None,
+                 sealed=None, salt_file=None):
+    """Run checked selections: ``entries`` holds ``(scenario, calibration scenario, extra key
+    columns)`` triples of resolved :class:`~rippleb.scenario.Scenario` objects.
+
+    The extra columns (``{name: value}``, e.g. the swept values of :mod:`rippleb.engine.sweep`)
+    become part of each row's key and columns, so two entries that share a scenario name
+    never share a row; their scenario content (hashed into every cache file name)
+    differs. The options are those of :func:`run`; ``config`` is saved in ``run.json``.
+    """
+    _warn_native_numerics()
+    plan = Plan(calibration_label=CALIBRATION)
+    for seed in seeds:
+        for scenario, calibration, extra in entries:
+            content = scenario_hash(scenario)
+            for condition in conditions:
+                # the device's first session; under a condition of the joint itself
+                # (`realistic`) that session has the joint's physics too
+                cal_case = Case(CALIBRATION, scenario_hash(calibration), calibration_condition(condition),
+                                seed, FITTING)
+                plan.add_sim(calibration, cal_case)
+                case = Case(scenario.name, content, condition, seed, SCORED)
+                plan.add_sim(scenario, case)
+                for method in names:
+                    key = RowKey(method, scenario.name, condition, seed, tuple(extra.items()))
+                    plan.add_row(key, case, cal_case)
+    if sealed is not None:
+        sealing.check_new_salt_path(sealed, out)
+    if executor is not None and (sealed is not None or salt_file is not None):
+        raise InputError("--sealed/--salt-file run on the local pool only (the salt would have to "
+                         "reach the Dask workers); drop --executor dask/--scheduler")
+    return _execute(registry, plan, out=out, jobs=jobs, timeout=timeout, memory_mb=memory_mb,
+                    resume=resume, progress=progress, config=config, on_start=on_start, executor=executor,
+                    sealed=sealed, salt_file=salt_file)
+
+
+def _warn_native_numerics() -> None:
+    """One line when this process cannot give rows that re-run to the last bit elsewhere."""
+    state = numerics.state()
+    if state != numerics.PORTABLE:
+        why = (f"{numerics.NATIVE_SWITCH} is set" if numerics.native_requested()
+               else "numpy was imported before rippleb")
+        warnings.warn(RunWarning(f"the rows run the host's own numeric paths ({state}; {why}): "
+                                 "they may differ in their last bits from the same rows on another "
+                                 "CPU (docs/reproducibility.md)"), stacklevel=3)
+
+
+def _warn_native_rows(rows: list[dict]) -> None:
+    """One line when rows that ran elsewhere (Dask workers) used their host's own paths."""
+    native = [row["numerics"] for row in rows if row.get("numerics", numerics.PORTABLE) != numerics.PORTABLE]
+    if native:
+        warnings.warn(RunWarning(f"{len(native)} rows ran on workers with their host's own numeric "
+                                 f"paths ({native[0]}): start 'dask worker' with the variables of "
+                                 "docs/scale.md so that they re-run to the last bit elsewhere"),
+                      stacklevel=3)
+
+
+def run_log(log, calibration=None, methods=None, *, jobs: int = 1, out=None,
+            timeout: float | None = DEFAULT_TIMEOUT_S, memory_mb: float | None = DEFAULT_MEMORY_MB,
+            progress: bool | None = False, on_start=None):
+    """Run methods on a recorded log; score against ``torque_ref`` (and ``torque_true`` if present).
+
+    Parameters
+    ----------
+    log, calibration
+        Paths to CSV/Parquet logs, or :class:`SensorLog`. Methods are fit on
+        ``calibration``; without one, on ``log`` itself if it has ``torque_ref`` (the
+        rows then say ``calibration = self``: fit and scored on the same data).
+    methods, jobs, out, timeout, memory_mb, progress, on_start
+        As in :func:`run`.
+    """
+    from rippleb.data import read_log
+
+    check_options(jobs=jobs, timeout=timeout, memory_mb=memory_mb)
+    log_name = Path(log).name if not isinstance(log, SensorLog) else log.meta.get("source", "log")
+    log = log if isinstance(log, SensorLog) else read_log(log)
+    check_recording(log, log_name)
+    if calibration is None:
+        if log.torque_ref is None:
+            raise InputError(f"{log_name}: no torque_ref column, so methods cannot be calibrated on it; "
+                             "pass --calibration FILE")
+        cal, label = log, "self"
+    else:
+        label = Path(calibration).name if not isinstance(calibration, SensorLog) else "calibration"
+        cal = calibration if isinstance(calibration, SensorLog) else read_log(calibration, spec=log.spec)
+        if cal.torque_ref is None:
+            raise InputError(f"{label}: a calibration log needs a torque_ref column")
+        check_recording(cal, label)
+        check_calibration(cal, label, log)
+    check_scored_length(log, log_name)
+    check_reference(cal, log_name if calibration is None else label)
+    registry = Registry.discover()
+    names = resolve_methods(registry, methods)
+    scenario = f"log:{log_name}"
+    case = Case(scenario, digest(log_bytes(log)), DEFAULT_CONDITION, 0, SCORED)
+    cal_case = Case(CALIBRATION, digest(log_bytes(cal)), DEFAULT_CONDITION, 0, FITTING)
+    plan = Plan(calibration_label=label)
+    plan.ready = {case: (log, Truth.from_recording(log)), cal_case: (cal, None)}
+    for method in names:
+        plan.add_row(RowKey(method, scenario, DEFAULT_CONDITION, 0), case, cal_case)
+    return _execute(registry, plan, out=out, jobs=jobs, timeout=timeout, memory_mb=memory_mb,
+                    resume=False, progress=progress, on_start=on_start,
+                    config={"methods": names, "log": log_name, "conditions": [DEFAULT_CONDITION]})
+
+
+def resolve_methods(registry: Registry, methods) -> list[str]:
+    """Method names to run; unknown names raise :class:`InputError` with a suggestion."""
+    wanted = split_names(methods)
+    if methods is not None and not wanted:
+        raise InputError("--methods is empty; give method names or 'all'")
+    if not wanted:
+        return registry.names("builtin")
+    if wanted == ["all"]:
+        return registry.names()
+    for name in wanted:
+        registry.get(name)
+    return list(dict.fromkeys(wanted))
+
+
+def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, progress, config,
+             on_start=None, executor=None, sealed=None, salt_file=None):
+    # Signals are held from here on and raised only where stopping leaves nothing half
+    # done (rippleb.interrupts): the loops between jobs and the waits, which poll. So an
+    # interrupt never orphans a job, a half-claimed run directory or a temporary file.
+    with interrupts.handling(), interrupts.held(), isolation.undumpable():
+        if executor is not None and hasattr(executor, "check"):
+            with interrupts.raising():  # a bad address is bad input: refused before the directory is claimed
+                executor.check()
+        # The local jobs are forked by a server forked now, before the first simulation, so
+        # no job's memory ever holds a truth (rippleb.engine.forkserver). Another executor runs its
+        # rows elsewhere.
+        server = (ForkServer.start(registry, preload=lambda: _warm(registry, plan)) if executor is None
+                  else contextlib.nullcontext())
+        seal, started = None, False
+        try:
+            with server:
+                # After the fork: the server, and every row it forks, never holds the salt.
+                seal = sealing.open_seal(out, resume, config, sealed=sealed, salt_file=salt_file)
+                with run_dir(out, resume, config, on_start) as out_dir:
+                    started = out_dir is not None
+                    interrupts.check_interrupted()
+                    if seal is not None:
+                        _warm_simulator(plan)  # sealed simulations are forked from here (rippleb.engine.sealing)
+                    results = ResultsFile(out_dir / "results.csv" if out_dir else None, resume=resume)
+                    try:
+                        _run_rows(registry, plan, results, out_dir, resume=resume, jobs=jobs, timeout=timeout,
+                                  memory_mb=memory_mb, progress=progress, server=server, executor=executor,
+                                  seal=seal)
+                    finally:  # finished or interrupted: the file in key order, from the rows in memory
+                        if results.rows:
+                            results.flush()
+        finally:  # every job has ended (the server reaped them): only now may a salt file exist
+            sealing.release(seal, started)
+    return results.frame()
+
+
+def _run_rows(registry, plan: Plan, results: ResultsFile, out_dir, *, resume, jobs, timeout, memory_mb,
+              progress, server, executor, seal) -> None:
+    """Run the rows of ``plan`` not yet in ``results`` and record each as it ends."""
+    if resume:
+        say_retried(results.drop_environmental(), out_dir)
+    done = results.done_keys()
+    # Case-major order: the rows of one simulated log run together, so its truth is
+    # released soon and memory stays bounded by the cases in flight, not the whole run.
+    rows = sorted((k for k in plan.rows if row_key(k.fields()) not in done),
+                  key=lambda k: (k.seed, k.scenario, k.extra, k.condition, k.method))
+    if resume and rows:
+        say_other_versions(results.rows, out_dir)
+    with tempfile.TemporaryDirectory(prefix="rippleb-cache-") as cache:
+        state = State(plan, registry, results, Path(cache), log_dir(out_dir), timeout,
+                      time.strftime("%Y%m%dT%H%M%S"), rows, seal=seal)
+        with progress_bar(len(rows), progress) as bar:
+            prepare_cases(state)
+            interrupts.check_interrupted()
+            if executor is None:
+                schedule(Pool(int(jobs), memory_mb, server=server), state, bar)
+            else:  # whole rows run elsewhere; this process only records them
+                executor.run(row_tasks(state, memory_mb), lambda key, fields: record(state, key, bar, **fields))
+                _warn_native_rows(results.rows)
+
+
+def _warm_simulator(plan: Plan) -> None:
+    """Load the simulator and its arm models in this process, which forks a sealed run's
+    simulations (rippleb's code only: no method is imported here)."""
+    from rippleb.simulator import robot, simulation  # noqa: F401 - the joint's kernels with it
+
+    for scenario, _ in plan.sims.values():
+        robot.load_model(scenario.robot)
+
+
+def _warm(registry, plan: Plan) -> None:
+    """Load in the fork server what the jobs of ``plan`` would each load again: the
+    simulator with the arm models of its scenarios, and its built-in methods with their
+    compiled kernels. Plugins are not imported here: only workers run plugin code."""
+    from rippleb.simulator import robot, simulation  # noqa: F401 - the joint's kernels with it
+
+    for scenario, _ in plan.sims.values():
+        robot.load_model(scenario.robot)
+    registry.load_builtins({key.method for key in plan.rows})
+
+
+def default_out_dir() -> Path:
+    """``runs/<timestamp>/`` in the current directory."""
+    return Path("runs") / _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+
+
+# ----------------------------------------------------------------------------- in-process helpers
+
+
+def evaluate(cls, calibration: SensorLog, evaluation: SensorLog, truth: Truth, params=None) -> dict:
+    """One row's result fields in this process (tests and tools; the runner isolates rows).
+
+    Fits ``cls(**params)`` on ``calibration``, streams ``evaluation`` and scores it
+    against ``truth``; failures of the method become ``error``, bad output ``invalid``.
+    """
+    from rippleb.registry import Entry
+
+    class _One:
+        def get(self, name):
+            return Entry(name, "builtin", "evaluate", cls=cls)
+
+    result = job_fns.run_row(getattr(cls, "name", "method"), params, calibration, evaluation, _One())
+    fields = result["info"]
+    if fields["status"] == "ok":
+        fields.update(job_fns.score_or_invalid(result["estimate"], truth))
+    if fields["status"] == "ok":
+        fields.update(tick_stats(result["ticks"], len(evaluation)))
+    return fields

@@ -1,0 +1,399 @@
+"""Scheduling a planned run: simulations, fits and rows as isolated jobs, scored here.
+
+The state (:class:`State`) holds the only copy of the truth, per scored case and only while
+rows of it are open. Jobs are :mod:`rippleb.engine.jobs` functions run by :class:`rippleb.engine.pool.Pool`;
+what they send back is read as plain arrays and a whitelist of typed fields.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import math
+import signal
+import sys
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from rippleb.engine import jobs as job_fns
+from rippleb.interrupts import check_interrupted
+from rippleb.engine.cache import Artefact, TamperedError, digest, load_log, log_bytes, store, unpack
+from rippleb.data import SensorLog
+from rippleb.metrics import tick_stats
+from rippleb.engine.pool import Pool
+from rippleb.registry import Registry, one_line
+from rippleb.engine.results import ENVIRONMENT, STATUSES, ResultsFile, RunWarning, system_info
+from rippleb.engine.rows import SCORED, Case, RowKey
+from rippleb.engine.sealing import SEALED_COLUMN
+
+
+@dataclass
+class Plan:
+    """What a run must do: simulations (with the roles they feed), rows, and their cases."""
+
+    calibration_label: str
+    sims: dict = field(default_factory=dict)       # (scenario, content, condition, seed) -> (obj, {roles})
+    rows: dict = field(default_factory=dict)       # RowKey -> (scored Case, calibration Case)
+    ready: dict = field(default_factory=dict)      # Case -> (log, truth) given, not simulated
+
+    def add_sim(self, scenario, case: Case) -> None:
+        key = _sim_key(case)
+        self.sims.setdefault(key, (scenario, set()))[1].add(case.role)
+
+    def add_row(self, key: RowKey, case: Case, cal_case: Case) -> None:
+        self.rows[key] = (case, cal_case)
+
+
+def _sim_key(case: Case) -> tuple:
+    return case.scenario, case.content, case.condition, case.seed
+
+
+@dataclass(frozen=True)
+class Fit:
+    method: str
+    calibration: Case
+
+
+@dataclass
+class State:
+    """Everything the scheduler tracks; the truth lives here only."""
+
+    plan: Plan
+    registry: Registry
+    results: ResultsFile
+    cache: Path
+    log_dir: Path | None
+    timeout: float | None
+    run_id: str
+    pending: list
+    sims: dict = field(default_factory=dict)        # sim key -> "pending" | "running" | "done" | "failed: ..."
+    artefacts: dict = field(default_factory=dict)   # Case -> Artefact
+    truths: dict = field(default_factory=dict)      # Case -> Truth (scored cases with pending rows)
+    fits: dict = field(default_factory=dict)        # _Fit -> "pending" | "running" | info dict
+    lengths: dict = field(default_factory=dict)     # Case -> (n_samples, n_ticks)
+    open_rows: dict = field(default_factory=dict)   # scored Case -> rows not yet recorded
+    logs: dict = field(default_factory=dict)        # scored Case -> its visible log, verified (rows open)
+    invalid: dict = field(default_factory=dict)     # Case -> why its simulated log is not physical
+    seal: object = None                              # a sealed run's rippleb.engine.sealing.Seal, else None
+
+
+def say_retried(dropped: list[dict], out_dir) -> None:
+    if dropped:
+        reasons = sorted({str(r.get("message", ""))[len(ENVIRONMENT):][:60] for r in dropped})
+        warnings.warn(f"{out_dir}/results.csv: running {len(dropped)} row(s) again that failed for an "
+                      f"environmental reason ({'; '.join(reasons)})", RunWarning, stacklevel=3)
+
+
+def prepare_cases(state: State) -> None:
+    needed = {c for key in state.pending for c in state.plan.rows[key]}
+    for case in needed:
+        if case in state.plan.ready:
+            log, truth = state.plan.ready[case]
+            state.artefacts[case] = store(state.cache / case.file_name(),
+                                          log_bytes(job_fns.visible_log(log, case.role)))
+            if truth is not None:
+                state.truths[case] = truth
+            state.lengths[case] = _lengths(log)
+    state.sims = {_sim_key(c): "pending" for c in needed if c not in state.plan.ready}
+    state.fits = {Fit(k.method, state.plan.rows[k][1]): "pending" for k in state.pending}
+    for key in state.pending:
+        case = state.plan.rows[key][0]
+        state.open_rows[case] = state.open_rows.get(case, 0) + 1
+
+
+def _lengths(log: SensorLog) -> tuple[int, int]:
+    return len(log), -(-len(log) // log.spec.block_size)
+
+
+# ----------------------------------------------------------------------------- scheduling
+
+
+def schedule(pool: Pool, state: State, bar) -> None:
+    """Run the pending jobs of ``state`` on ``pool`` and record every row.
+
+    Raises ``KeyboardInterrupt`` between jobs once SIGINT or SIGTERM has arrived
+    (:mod:`rippleb.interrupts`; the pool's waits poll for them); the rows that had ended
+    are recorded first, and the running jobs ended, so ``--resume`` runs just those.
+    """
+    finished_rows = []   # rows ended but not yet scored
+    try:
+        while state.pending or pool.busy or finished_rows:
+            while pool.free and state.pending:
+                check_interrupted()
+                if not _start_next(pool, state, bar):
+                    break
+            # Score the rows that ended after their slots have new jobs: the slots do not
+            # sit idle while this process scores.
+            while finished_rows:
+                _finish_row(finished_rows.pop(0), state, bar)
+            if not (state.pending or pool.busy):
+                break
+            check_interrupted()
+            for fin in pool.wait():
+                if isinstance(fin.key, tuple):
+                    _finish_sim(fin, state)
+                elif isinstance(fin.key, Fit):
+                    state.fits[fin.key] = _fit_outcome(fin, state)
+                else:
+                    finished_rows.append(fin)
+    finally:
+        pool.kill_all()
+        while finished_rows:  # interrupted: what finished is still recorded
+            _finish_row(finished_rows.pop(0), state, bar)
+
+
+def _start_next(pool: Pool, state: State, bar) -> bool:
+    """Start one job: the first row whose inputs exist, else its fit, else the next simulation."""
+    for key in list(state.pending):
+        case, cal_case = state.plan.rows[key]
+        failed = [state.sims.get(_sim_key(c), "") for c in (case, cal_case)]
+        failed = [f for f in failed if f.startswith("failed")]
+        if failed:
+            _record(state, key, bar, status="error", message=_environment_first(f"simulation {failed[0]}"))
+            return True
+        if not all(c in state.artefacts for c in (case, cal_case)):
+            continue
+        unphysical = _unphysical(state, case, cal_case)
+        if unphysical:  # no method is fit or scored on a joint that does not exist
+            _record(state, key, bar, status="invalid", message=unphysical)
+            return True
+        fit = Fit(key.method, cal_case)
+        if state.fits[fit] == "pending":
+            state.fits[fit] = "running"
+            pool.submit(fit, _fit_job(fit, state), state.timeout, _output(state, f"fit--{key.method}--{key.seed}"),
+                        confine=_confined(state))
+            return True
+        if state.fits[fit] == "running":
+            continue
+        state.pending.remove(key)
+        if state.fits[fit]["status"] != "ok":
+            _record(state, key, bar, **_row_fields(state.fits[fit]))
+            return True
+        try:
+            evaluation = _evaluation_log(state, case)
+        except TamperedError as exc:
+            _record(state, key, bar, status="error", message=one_line(exc))
+            return True
+        n_samples, _ = state.lengths[case]
+        pool.submit(key, _row_job(key, state, state.fits[fit], evaluation), state.timeout,
+                    _output(state, f"{key.method}--{key.scenario}--{key.condition}--{key.seed}"),
+                    max_bytes=24 * n_samples + 2**20, confine=_confined(state))
+        return True
+    for sim, st in state.sims.items():
+        if st == "pending":
+            state.sims[sim] = "running"
+            scenario, roles = state.plan.sims[sim]
+            paths = {role: str(state.cache / Case(*sim, role).file_name()) for role in roles}
+            _submit_sim(pool, state, sim, _sim_job(scenario, sim, paths, state.seal))
+            return True
+    return False
+
+
+def _confined(state: State) -> tuple[str, ...]:
+    """What a method's worker sees read-only: the run directory and the cache."""
+    run_dir = state.results.path.parent if state.results.path is not None else None
+    return tuple(str(p) for p in (run_dir, state.cache) if p is not None)
+
+
+def _output(state: State, stem: str) -> str | None:
+    from rippleb.engine.rows import safe_name
+
+    return str(state.log_dir / f"{safe_name(stem)}.txt") if state.log_dir else None
+
+
+def _sim_job(scenario, sim: tuple, paths: dict, seal=None) -> job_fns.Job:
+    if seal is None:
+        return job_fns.Job("simulate", (scenario, sim[3], sim[2], paths))
+    return job_fns.Job("simulate", (scenario, sim[3], sim[2], paths, seal.device_seed(sim[3])))
+
+
+def _submit_sim(pool: Pool, state: State, sim: tuple, job: job_fns.Job) -> None:
+    """Start a simulation. A sealed one is forked from this process, never sent to the
+    fork server: the server's memory, freed parts included, is inherited by every row it
+    forks later, and the job's arguments hold the secret device seed (rippleb.engine.sealing)."""
+    if state.seal is None or pool.server is None:
+        pool.submit(sim, job, None, None)
+        return
+    server, pool.server = pool.server, None   # this one job only: the rows stay with the server
+    try:
+        pool.submit(sim, functools.partial(job, None), None, None)  # a simulation needs no registry
+    finally:
+        pool.server = server
+
+
+def _finish_sim(fin, state: State) -> None:
+    if fin.kind != "done":
+        state.sims[fin.key] = f"failed: {_why(fin, state)}"
+        return
+    arrays, info = unpack(fin.value)
+    for role, ref in info["artefacts"].items():
+        case = Case(*fin.key, role)
+        state.artefacts[case] = Artefact(ref["path"], ref["sha256"])
+        if info.get("invalid"):
+            state.invalid[case] = str(info["invalid"])
+        if role == SCORED:
+            truth = job_fns.truth_from_message(arrays, info)
+            state.truths[case] = truth
+            n_samples = len(truth.eval_mask)
+            state.lengths[case] = (n_samples, -(-n_samples // int(info["block_size"])))
+    state.sims[fin.key] = "done"
+
+
+def _unphysical(state: State, case: Case, cal_case: Case) -> str | None:
+    """Why a row's scored or calibration log is not a joint that exists (checked once per
+    simulation, :func:`rippleb.simulator.validity.check_simulation`), or None."""
+    for c, what in ((case, "scored"), (cal_case, "calibration")):
+        if c in state.invalid:
+            return f"the simulated {what} log is not physical: {state.invalid[c]}"
+    return None
+
+
+def _fit_job(fit: Fit, state: State) -> job_fns.Job:
+    return job_fns.Job("fit", (fit.method, None, state.artefacts[fit.calibration]))
+
+
+def _fit_outcome(fin, state: State) -> dict:
+    if fin.kind == "done":
+        try:
+            arrays, info = unpack(fin.value)
+            if "fitted" in arrays:  # stored here: the fit's worker cannot write the cache
+                path = state.cache / f"fit-{digest(repr(fin.key).encode())[:32]}.pkl"
+                artefact = store(path, arrays["fitted"].tobytes())
+                info["fitted"] = {"path": artefact.path, "sha256": artefact.sha256}
+            return info
+        except Exception as exc:  # noqa: BLE001 - whatever a fit sends, it is one status line
+            return {"status": "error", "message": f"fit sent an unreadable result ({type(exc).__name__})"}
+    if fin.kind == "timeout":
+        return {"status": "timeout", "message": f"fit killed after {state.timeout:g} s"}
+    return {"status": "error", "message": _environment_first(f"fit: {_why(fin, state)}")}
+
+
+def _environment_first(message: str) -> str:
+    """Move an environmental marker to the front, where ``--resume`` looks for it."""
+    if ENVIRONMENT in message and not message.startswith(ENVIRONMENT):
+        return ENVIRONMENT + message.replace(ENVIRONMENT, "", 1)
+    return message
+
+
+def _evaluation_log(state: State, case: Case) -> SensorLog:
+    """The visible log of a scored case, read and verified here once for all its rows.
+
+    Each row's job carries it (to the fork server, which forks the row), so no row reads
+    and hashes the file again (the hash of a one-second log cost each row more than its
+    own process start). A file rewritten before this read fails the rows that would
+    use it, as a row's own check did; one rewritten after it changes nothing.
+    """
+    if case not in state.logs:
+        state.logs[case] = job_fns.visible_log(load_log(state.artefacts[case]), SCORED)
+    return state.logs[case]
+
+
+def _row_job(key: RowKey, state: State, fit: dict, evaluation: SensorLog) -> job_fns.Job:
+    case, cal_case = state.plan.rows[key]
+    calibration = state.artefacts[cal_case]
+    fitted = Artefact(**fit["fitted"]) if isinstance(fit.get("fitted"), dict) else None
+    fit_info = {k: fit[k] for k in ("params", "fit_s") if k in fit} if fitted else None
+    return job_fns.Job("row", (key.method, None, calibration, evaluation, fitted, fit_info))
+
+
+def _finish_row(fin, state: State, bar) -> None:
+    key = fin.key
+    case = state.plan.rows[key][0]
+    if fin.kind == "done":
+        fields = _score_row(fin.value, state, case)
+    elif fin.kind == "timeout":
+        fields = {"status": "timeout", "message": f"killed after {state.timeout:g} s"}
+    else:
+        fields = {"status": "error", "message": _why(fin, state)}
+    _record(state, key, bar, wall_s=fin.wall_s, **fields)
+
+
+def _score_row(value: bytes, state: State, case: Case) -> dict:
+    """Score what a row sent against the truth held here; trust only its estimate."""
+    try:
+        arrays, info = unpack(value)
+    except Exception as exc:  # noqa: BLE001 - a row's bytes are untrusted
+        return {"status": "error", "message": f"the row sent an unreadable result ({type(exc).__name__})"}
+    fields = _row_fields(info)
+    if fields["status"] != "ok":
+        return fields
+    truth = state.truths[case]
+    n_samples, n_ticks = state.lengths[case]
+    checked = job_fns.check_estimate(arrays, n_samples, n_ticks)
+    if isinstance(checked, str):
+        return {**fields, "status": "invalid", "message": checked}
+    estimate, ticks = checked
+    fields["n_samples"] = n_samples
+    fields.update(job_fns.score_or_invalid(estimate, truth))
+    if fields["status"] == "ok":
+        fields.update(tick_stats(ticks, n_samples))
+    return fields
+
+
+def _row_fields(info: dict) -> dict:
+    """The fields a job may set, type-checked: a job cannot write metrics or keys."""
+    status = info.get("status") if info.get("status") in STATUSES else "error"
+    fields = {"status": status, "message": str(info.get("message", ""))[:500],
+              "params": str(info.get("params", ""))[:2000]}
+    fit_s = info.get("fit_s")
+    if isinstance(fit_s, (int, float)) and math.isfinite(fit_s):
+        fields["fit_s"] = float(fit_s)
+    if status != info.get("status"):
+        fields["message"] = f"the row sent an unknown status {str(info.get('status'))[:40]!r}"
+    return fields
+
+
+def _record(state: State, key: RowKey, bar, **fields) -> None:
+    if key in state.pending:
+        state.pending.remove(key)
+    case, cal_case = state.plan.rows[key]
+    # An executor's fields may carry the system information of the machine that ran the row.
+    row = {**system_info(), **key.fields(), **fields, "calibration": state.plan.calibration_label,
+           "scenario_sha256": case.content, "run_id": state.run_id}
+    if state.seal is not None:  # the column exists only in sealed runs: unsealed rows stay as they were
+        row[SEALED_COLUMN] = True
+    state.results.add(row)
+    bar.update()
+    # The truth of a case is kept only while rows of it are open.
+    state.open_rows[case] -= 1
+    if not state.open_rows[case]:
+        state.truths.pop(case, None)
+        state.logs.pop(case, None)
+
+
+record = _record  # for executors that run whole rows elsewhere (rippleb.engine.executors)
+
+
+def _why(fin, state: State) -> str:
+    if fin.kind == "raised":
+        text = fin.value
+        if any(marker in text for marker in ("No space left", "Disk quota")):
+            return f"{ENVIRONMENT}{text}"
+        return text
+    if fin.kind == "timeout":
+        return f"killed after {state.timeout:g} s"
+    if fin.kind == "oversized":
+        return f"sent {fin.value} bytes, more than a row's result can hold"
+    if fin.kind == "garbled":
+        return (f"its process wrote into rippleb's control pipe ({bytes(fin.value)!r}...); "
+                "the job was ended and its result discarded")
+    code = fin.value
+    if code is not None and code < 0:
+        try:
+            name = signal.Signals(-code).name
+        except ValueError:
+            name = f"number {-code}"
+        if -code == signal.SIGKILL:  # not our timeout: the OOM killer or a user
+            return f"{ENVIRONMENT}process killed by {name} (out of memory, or killed from outside)"
+        return f"process killed by signal {name} (a crash?)"
+    return f"process exited with code {code} before reporting"
+
+
+@contextlib.contextmanager
+def progress_bar(total: int, enabled):
+    from tqdm import tqdm
+
+    with tqdm(total=total, disable=(None if enabled is None else not enabled), file=sys.stderr,
+              unit="row", dynamic_ncols=True) as bar:
+        yield bar

@@ -1,0 +1,264 @@
+"""``rippleb report DIR --html``: one self-contained, interactive ``index.html``.
+
+The page holds the method x condition summary and headline, per condition a sortable
+table of every metric (mean ± 95 % t-interval over seeds), interactive figures drawn with
+plotly (every row as a point whose hover names its method, scenario, condition and seed;
+accuracy against cost; the signals of one device, zoomable onto a restart) and the
+provenance. plotly.js is embedded once, in the first figure, so the page opens without
+network. A small script at the top of the page lists any JavaScript error in the page
+itself (``#page-errors``), so a reader, and the browser test, see a broken figure.
+"""
+
+from __future__ import annotations
+
+import html
+import re
+from pathlib import Path
+
+import numpy as np
+
+from rippleb.files import atomic_path
+from rippleb.report.stats import (condition_order, fmt_interval, interval_frame, method_order, scenario_order,
+                           with_condition)
+
+#: Colour per built-in method, the same as the matplotlib figures (tableau palette).
+COLORS = {"raw": "#1f77b4", "lowpass": "#17becf", "current-based": "#bf00bf", "order-tracking": "#d62728",
+          "order-tracking-no-deadzone": "#ff7f0e", "order-tracking-no-backprop": "#8c564b",
+          "switched-notch": "#2ca02c", "kalman-ripple": "#9467bd", "angle-adaptive": "#bcbd22",
+          "angle-adaptive-frozen": "#7f7f7f"}
+
+STYLE = """body{font-family:system-ui,sans-serif;margin:1.5em auto;max-width:1200px;color:#222}
+table{border-collapse:collapse;margin:.5em 0 1.5em;font-size:13px}
+th,td{border:1px solid #ccc;padding:3px 7px;text-align:right}
+th{background:#f2f2f2;cursor:pointer;user-select:none}th:first-child,td:first-child,
+td.text{text-align:left}th.sorted-asc::after{content:" \\25B2"}th.sorted-desc::after{content:" \\25BC"}
+#page-errors{color:#b00}.wide{overflow-x:auto}.note{color:#555;font-size:13px}"""
+
+#: Collects every uncaught error and rejected promise of the page into ``#page-errors``.
+ERROR_HOOK = """window.pageErrors=[];function _pe(m){window.pageErrors.push(String(m));
+var l=document.getElementById('page-errors');if(l){var i=document.createElement('li');
+i.textContent=String(m);l.appendChild(i);}}
+window.addEventListener('error',function(e){_pe(e.message||e);});
+window.addEventListener('unhandledrejection',function(e){_pe(e.reason);});"""
+
+#: Click a header to sort its table by that column (numbers by their mean, in data-v).
+SORT_SCRIPT = """document.querySelectorAll('table.sortable th').forEach(function(th,col){
+th.addEventListener('click',function(){var tb=th.closest('table').tBodies[0];
+var asc=!th.classList.contains('sorted-asc');th.parentNode.querySelectorAll('th').forEach(
+function(h){h.classList.remove('sorted-asc','sorted-desc');});th.classList.add(asc?'sorted-asc':'sorted-desc');
+var rows=Array.from(tb.rows);rows.sort(function(a,b){var x=a.cells[col],y=b.cells[col];
+var u=parseFloat(x.dataset.v),v=parseFloat(y.dataset.v);var r=(isNaN(u)||isNaN(v))?
+x.textContent.localeCompare(y.textContent):(u-v);return asc?r:-r;});
+rows.forEach(function(r){tb.appendChild(r);});});});"""
+
+
+def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals: dict | None = None) -> Path:
+    """Write the interactive report of ``frame`` to ``path`` and return it.
+
+    Parameters
+    ----------
+    frame
+        The result rows.
+    prov
+        The report's provenance (as :func:`rippleb.report.writer.report` builds it).
+    figure_seed
+        Device of the signal figure (stop-restart re-simulated and streamed), or None for
+        figures from the rows only.
+    signals
+        ``{scenario: ScenarioSignals}`` already streamed for ``figure_seed`` (saves
+        re-simulating them).
+    """
+    from rippleb.report.tables import (condition_headline, condition_summary_markdown, counts_sentence, is_recorded,
+                                title_lines)
+
+    frame = with_condition(frame)
+    figures = [_rows_figure(frame), _cost_figure(frame)]
+    restart = _restart_figure(frame, figure_seed, signals)
+    if restart is not None:
+        figures.append(restart)
+    divs = [fig.to_html(full_html=False, include_plotlyjs=(i == 0), div_id=f"figure-{i}",
+                        config={"responsive": True, "displaylogo": False})
+            for i, fig in enumerate(figures)]
+    title = title_lines(prov.get("published", False), is_recorded(frame), str(prov.get("run_dir", "DIR")))
+    body = [f"<h1>{_md(title[0].lstrip('# '))}</h1>", f"<p>{_md(title[2])}</p>",
+            f"<p>{_md(counts_sentence(frame, is_recorded(frame)))}</p>",
+            '<ul id="page-errors"></ul>',
+            "<h2>Method x condition: mean RMS error over the scenarios [Nm]</h2>",
+            _markdown_table(condition_summary_markdown(frame)),
+            "<ul>" + "".join(f"<li>{_md(s)}</li>" for s in condition_headline(frame)) + "</ul>"]
+    if frame["condition"].nunique() > 1:
+        from rippleb.report.verdicts import method_verdicts
+
+        body += ["<h3>Each method in plain words</h3>",
+                 "<ul>" + "".join(f"<li>{_md(v)}</li>" for v in method_verdicts(frame)) + "</ul>"]
+    body += ["<h2>Every row</h2>", '<p class="note">One point per row (device); hover for method, '
+             "scenario, condition and seed; drag to zoom, double-click to reset.</p>", divs[0],
+             "<h2>Accuracy against per-tick cost</h2>", divs[1]]
+    if restart is not None:
+        body += [f"<h2>Signals of device seed {figure_seed} on stop-restart</h2>",
+                 '<p class="note">Drag over a restart to zoom in; the legend toggles methods.</p>', divs[2]]
+    for condition in condition_order(frame["condition"].unique()):
+        body += [f"<h2>All metrics under <code>{html.escape(condition)}</code></h2>",
+                 '<p class="note">Mean ± 95 % t-interval over seeds; click a header to sort.</p>',
+                 _metrics_table(frame[frame["condition"] == condition])]
+    body += ["<h2>Provenance</h2>", _provenance_table(prov)]
+    page = ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+            f"<title>{html.escape(title[0].lstrip('# ').replace('`', ''))}</title><script>{ERROR_HOOK}</script>"
+            f"<style>{STYLE}</style></head><body>" + "\n".join(body) +
+            f"<script>{SORT_SCRIPT}</script></body></html>\n")
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        tmp.write_text(page, encoding="utf-8")
+    return path
+
+
+# --------------------------------------------------------------------------- tables
+
+def metric_columns(frame) -> list[str]:
+    """Every numeric metric column of the rows that has a value."""
+    from rippleb.metrics import METRIC_COLUMNS
+
+    return [c for c in METRIC_COLUMNS if c in frame and frame[c].notna().any()]
+
+
+def _metrics_table(rows) -> str:
+    columns = metric_columns(rows)
+    stats = {c: {(r.method, r.scenario): r for r in interval_frame(rows, c).itertuples()} for c in columns}
+    head = "".join(f"<th>{html.escape(c)}</th>" for c in ["method", "scenario", "ok"] + columns)
+    body = []
+    for m in method_order(rows["method"].unique()):
+        for s in scenario_order(rows.loc[rows["method"] == m, "scenario"].unique()):
+            mine = rows[(rows["method"] == m) & (rows["scenario"] == s)]
+            cells = [f'<td class="text">{html.escape(m)}</td>', f'<td class="text">{html.escape(s)}</td>',
+                     f'<td data-v="{(mine["status"] == "ok").mean():.6g}">'
+                     f'{(mine["status"] == "ok").sum()}/{len(mine)}</td>']
+            for c in columns:
+                r = stats[c].get((m, s))
+                value = "" if r is None or not np.isfinite(r.mean) else f"{r.mean:.9g}"
+                cells.append(f'<td data-v="{value}">{"n/a" if r is None else fmt_interval(r.mean, r.half)}</td>')
+            body.append("<tr>" + "".join(cells) + "</tr>")
+    return (f'<div class="wide"><table class="sortable"><thead><tr>{head}</tr></thead>'
+            f'<tbody>{"".join(body)}</tbody></table></div>')
+
+
+def _markdown_table(text: str) -> str:
+    """A GitHub Markdown table (as :mod:`rippleb.report.tables` writes) as a sortable HTML table."""
+    # split on the bars that are not escaped: rippleb.report.tables.markdown writes a bar in a cell
+    # as a backslash and a bar
+    lines = [[c.replace("\\|", "|") for c in re.split(r"(?<!\\)\|", line.strip()[1:-1])]
+             for line in text.splitlines() if line.startswith("|")]
+    if len(lines) < 2:
+        return f"<p>{html.escape(text)}</p>"
+    head = "".join(f"<th>{html.escape(c.strip())}</th>" for c in lines[0])
+    rows = []
+    for cells in lines[2:]:
+        tds = []
+        for i, c in enumerate(cells):
+            c = c.strip()
+            try:
+                v = float(c.split(" ")[0])
+            except ValueError:
+                v = ""
+            text = i == 0 or v == ""  # names and words left-aligned, numbers right
+            tds.append(f'<td class="{"text" if text else ""}" data-v="{v}">{html.escape(c)}</td>')
+        rows.append("<tr>" + "".join(tds) + "</tr>")
+    return f'<table class="sortable"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
+
+
+def _provenance_table(prov: dict) -> str:
+    from rippleb.report.provenance import provenance_markdown
+
+    return _markdown_table(provenance_markdown(prov))
+
+
+def _md(text: str) -> str:
+    """Escape ``text`` and turn Markdown back-ticks into <code>."""
+    parts = html.escape(text).split("`")
+    return "".join(f"<code>{p}</code>" if i % 2 else p for i, p in enumerate(parts))
+
+
+# --------------------------------------------------------------------------- figures
+
+def _color(method: str, index: int) -> str:
+    fallback = ("#9edae5", "#c49c94", "#f7b6d2", "#000000")
+    return COLORS.get(method, fallback[index % len(fallback)])
+
+
+def _rows_figure(frame):
+    """``rms_error_nm`` of every ok row by scenario, one trace per method, one panel row per
+    condition; hover shows method, scenario, condition, seed."""
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+
+    ok = frame[frame["status"] == "ok"]
+    conditions = condition_order(ok["condition"].unique()) or ["same-session"]
+    fig = make_subplots(rows=len(conditions), cols=1, shared_xaxes=True,
+                        subplot_titles=[f"condition {c}" for c in conditions], vertical_spacing=0.08)
+    methods = method_order(ok["method"].unique())
+    scenarios = scenario_order(ok["scenario"].unique())
+    for k, condition in enumerate(conditions, start=1):
+        rows = ok[ok["condition"] == condition]
+        for i, m in enumerate(methods):
+            mine = rows[rows["method"] == m]
+            fig.add_trace(go.Scatter(
+                x=[scenarios.index(s) + (i - len(methods) / 2) * 0.08 for s in mine["scenario"]],
+                y=mine["rms_error_nm"], mode="markers", name=m, legendgroup=m, showlegend=(k == 1),
+                marker={"color": _color(m, i), "size": 6, "opacity": 0.75},
+                customdata=np.column_stack([mine["method"], mine["scenario"], mine["condition"], mine["seed"]]),
+                hovertemplate="method %{customdata[0]}<br>scenario %{customdata[1]}<br>condition "
+                              "%{customdata[2]}<br>seed %{customdata[3]}<br>RMS error %{y:.4g} Nm<extra></extra>"),
+                row=k, col=1)
+        fig.update_yaxes(type="log", title_text="RMS error [Nm]", row=k, col=1)
+    fig.update_xaxes(tickvals=list(range(len(scenarios))), ticktext=scenarios)
+    fig.update_layout(height=320 * len(conditions) + 80, margin={"t": 40, "b": 40}, legend={"orientation": "h"})
+    return fig
+
+
+def _cost_figure(frame):
+    """Every ok row: ``us_per_tick_p50`` against ``rms_error_nm``, hover names the row."""
+    import plotly.graph_objects as go
+
+    ok = frame[frame["status"] == "ok"]
+    cost = "us_per_tick_p50" if "us_per_tick_p50" in ok else "us_per_tick_p99"
+    fig = go.Figure()
+    for i, m in enumerate(method_order(ok["method"].unique())):
+        mine = ok[ok["method"] == m]
+        fig.add_trace(go.Scatter(
+            x=mine[cost], y=mine["rms_error_nm"], mode="markers", name=m, marker={"color": _color(m, i), "size": 6},
+            customdata=np.column_stack([mine["method"], mine["scenario"], mine["condition"], mine["seed"]]),
+            hovertemplate="method %{customdata[0]}<br>scenario %{customdata[1]}<br>condition %{customdata[2]}"
+                          "<br>seed %{customdata[3]}<br>" + cost + " %{x:.3g} us<br>RMS error %{y:.4g} Nm<extra></extra>"))
+    fig.update_layout(xaxis={"type": "log", "title": f"{cost} [us]"},
+                      yaxis={"type": "log", "title": "RMS error against torque_true [Nm]"},
+                      height=480, margin={"t": 30})
+    return fig
+
+
+def _restart_figure(frame, seed, signals):
+    """Each method's estimate and torque_true on stop-restart for ``seed``, at the control
+    rate (the last sample of each tick: what a controller reads), zoomable."""
+    import plotly.graph_objects as go
+
+    from rippleb.simulator.conditions import DEFAULT_CONDITION
+
+    ok = frame[(frame["status"] == "ok") & (frame["condition"] == DEFAULT_CONDITION)]
+    if seed is None or "stop-restart" not in set(ok["scenario"]):
+        return None
+    sig = (signals or {}).get("stop-restart")
+    if sig is None:
+        from rippleb.report.figures import fit_methods, stream_methods
+
+        fitted, _ = fit_methods(method_order(ok["method"].unique()), seed)
+        sig = stream_methods(fitted, "stop-restart", seed)
+    log = sig.sim.log
+    every = max(1, int(round(log.spec.fs / log.spec.control_rate)))
+    pick = slice(every - 1, None, every)
+    fig = go.Figure()
+    fig.add_trace(go.Scatter(x=log.t[pick], y=log.torque_true[pick], name="torque_true",
+                             line={"color": "black", "width": 2}))
+    for i, m in enumerate(method_order(sig.estimates)):
+        fig.add_trace(go.Scatter(x=log.t[pick], y=sig.estimates[m][pick], name=m,
+                                 line={"color": _color(m, i), "width": 1}))
+    fig.update_layout(xaxis={"title": "time [s]", "rangeslider": {"visible": True}},
+                      yaxis={"title": "torque [Nm]"}, height=520, margin={"t": 30})
+    return fig

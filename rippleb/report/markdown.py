@@ -1,0 +1,33 @@
+"""Markdown cells and tables: what every table of the report, and Table I, is written with."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def markdown(rows, headers) -> str:
+    """A GitHub Markdown table; cells are printed as given, but for ``|``, escaped as ``\\|``
+    (a scenario file ``a|b.toml`` would otherwise split its cell in two)."""
+    from tabulate import tabulate
+
+    rows = [[escape_cell(c) for c in row] for row in rows]
+    return tabulate(rows, headers=[escape_cell(h) for h in headers], tablefmt="github", disable_numparse=True)
+
+
+def escape_cell(value):
+    """A table cell with every ``|`` escaped for Markdown (other values unchanged)."""
+    return value.replace("|", "\\|") if isinstance(value, str) else value
+
+
+def plural(n: int, word: str) -> str:
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
+def first_line(message) -> str:
+    text = "" if message is None or (isinstance(message, float) and np.isnan(message)) else str(message)
+    return text.splitlines()[0] if text.strip() else "(no message)"
+
+
+def one_line(message) -> str:
+    text = "" if message is None or (isinstance(message, float) and np.isnan(message)) else str(message)
+    return text.splitlines()[0][:200].replace("|", "/") if text else ""

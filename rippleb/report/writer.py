@@ -1,0 +1,346 @@
+"""``rippleb report``: the comparison of a run, generated from its ``results.csv``.
+
+``rippleb report DIR [--out OUT] [--published] [--html]`` writes ``README.md`` (the
+method x condition summary and headline, then per condition the method x scenario
+matrices as mean and 95 % t-interval over seeds, the timing table, a ranking per scenario
+and the paper's Table I replica; the rows that did not finish ok; provenance), every row
+as ``results.csv``, ``provenance.json``, the figures of :mod:`rippleb.report.figures` and, with
+``--html``, the interactive ``index.html`` of :mod:`rippleb.report.html_report`.
+
+Tables live in :mod:`rippleb.report.tables`, statistics in :mod:`rippleb.report.stats`, provenance in
+:mod:`rippleb.report.provenance`; this module reads the rows and writes the files. The names
+used by earlier versions of this module are re-exported here.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from rippleb.errors import InputError
+from rippleb.files import atomic_path
+from rippleb.report.provenance import (collect_provenance, environment_sentence, environment_warnings, git_state,
+                                provenance_markdown,  # noqa: F401
+                                read_run_provenance, seeds_text)
+from rippleb.metrics import METRIC_COLUMNS
+from rippleb.engine.results import RunWarning, copy_rows, row_key, swept_columns
+from rippleb.engine.sealing import sealed_text
+from rippleb.report.verdicts import method_verdicts
+from rippleb.report.stats import (CONFIDENCE, METHOD_ORDER, fmt_interval, interval_frame,  # noqa: F401
+                           method_order, scenario_order, t_interval, with_condition)
+from rippleb.report.table_one import (PAPER_CITATION, PAPER_TABLE_I, TABLE_I_METHODS,  # noqa: F401
+                               TABLE_I_SCENARIO, table_one, table_one_markdown)
+from rippleb.report.tables import (ACCURACY_COLUMNS, MATRIX_COLUMNS, by_condition,  # noqa: F401
+                            counts_sentence, is_recorded, title_lines,
+                            condition_headline, condition_summary, condition_summary_markdown,
+                            failed_markdown, headline_sentences, matrix_markdown, plural,
+                            ranking, ranking_markdown, summary_text, timing_markdown, timing_note)
+
+def load_rows(run_dir):
+    """The rows of ``run_dir/results.csv`` as a DataFrame; one-line error if there are none."""
+    from rippleb.integrity import verified_rows
+    from rippleb.engine.results import ResultsFile, read_rows
+
+    run_dir = Path(run_dir)
+    path = run_dir / "results.csv"
+    if not path.is_file():
+        raise InputError(f"{run_dir}: no results.csv (is this a rippleb run directory?)")
+    results = ResultsFile(None)
+    results.rows = verified_rows(run_dir, read_rows(path), path)
+    frame = results.frame()
+    if frame.empty:
+        raise InputError(f"{path}: no rows to report")
+    _warn_implausible(frame, path)
+    return frame
+
+
+def frame_condition_count(frame) -> int:
+    """How many deployment conditions the rows hold (a file without the column: one)."""
+    return int(frame["condition"].nunique()) if "condition" in frame else 1
+
+
+#: Metrics that no row can hold below zero (``step_latency_ms`` can: an estimate may lead).
+NON_NEGATIVE = tuple(c for c in METRIC_COLUMNS if c != "step_latency_ms")
+
+
+def _warn_implausible(frame, path) -> None:
+    """One warning line naming the rows whose metrics no run writes: negative where the
+    metric cannot be (an RMS error), or infinite (n/a is empty, never inf). The rows are
+    kept and reported as they are: the file says so, the report must not hide it."""
+    bad = []
+    for column in METRIC_COLUMNS:
+        if column not in frame:
+            continue
+        values = frame[column].astype(float)
+        wrong = np.isinf(values) | ((values < 0) if column in NON_NEGATIVE else False)
+        for i in np.flatnonzero(np.asarray(wrong)):
+            row = frame.iloc[i]
+            bad.append(f"{row['method']}/{row['scenario']}/{row['condition']}/seed {row['seed']} "
+                       f"{column} = {values.iloc[i]:g}")
+    if bad:
+        warnings.warn(f"{path}: {len(bad)} metric value(s) that no rippleb run writes (negative or "
+                      f"infinite; edited or corrupted?), reported as they are: {'; '.join(bad[:3])}"
+                      f"{'; ...' if len(bad) > 3 else ''}", RunWarning, stacklevel=3)
+
+
+def tables_markdown(frame) -> str:
+    """The README's tables and their sentences: a pure function of the rows, so
+    ``tests/test_published.py`` can regenerate it and find it in ``results/README.md``."""
+    source = "Recorded" if is_recorded(frame) else "Simulated"
+    parts = ["## Method x condition (mean `rms_error_nm` over the scenarios, 95 % interval)", "",
+             "Per seed (device), the mean RMS error over the scenarios every method finished under "
+             "that condition; then mean ± 95 % t-interval over seeds.", "",
+             condition_summary_markdown(frame), ""]
+    parts += [f"- {s}" for s in condition_headline(frame)] + [""]
+    verdicts = method_verdicts(frame)
+    if verdicts and frame_condition_count(frame) > 1:
+        parts += ["### Each method in plain words", "",
+                  "Where it wins and where it breaks, from the table above; why, from what the "
+                  "method assumes of the ripple (its page under docs/methods/).", ""]
+        parts += [f"- {v}" for v in verdicts] + [""]
+    for condition, rows in by_condition(frame):
+        parts += _condition_section(condition, rows, source)
+    parts += ["## Rows that did not finish ok", "", failed_markdown(frame)]
+    return "\n".join(parts)
+
+
+def _condition_section(condition: str, rows, source: str) -> list[str]:
+    from rippleb.simulator.conditions import CONDITIONS
+
+    what = CONDITIONS.get(condition, "not a built-in condition")
+    parts = [f"## Condition `{condition}`: {what}", ""]
+    parts += [f"- {s}" for s in headline_sentences(rows)] + [""]
+    for column, (title, unit) in MATRIX_COLUMNS.items():
+        if column in rows and rows[column].notna().any():  # older rows, or n/a everywhere
+            parts += [f"### `{column}`: {title} [{unit}] ({condition})", "", matrix_markdown(rows, column), ""]
+    if "us_per_tick_p99" in rows:
+        parts += [f"### Compute time of one control tick, p50 / p99 [us] ({condition})", "",
+                  timing_markdown(rows), ""]
+    parts += [f"### Ranking per scenario by `rms_error_nm` ({condition})", "", ranking_markdown(rows), ""]
+    parts += [f"### The paper's Table I, replicated ({condition})", "", table_one_markdown(rows, source), ""]
+    return parts
+
+
+def read_results_exact(path):
+    """A results CSV with every float parsed back to the exact double that was written.
+
+    pandas >= 3 parses with round-trip precision by default (and deprecates the option);
+    older pandas needs ``float_precision="round_trip"``, its default may differ in the last bit.
+    """
+    import pandas as pd
+
+    if int(pd.__version__.split(".")[0]) >= 3:
+        return pd.read_csv(path)
+    return pd.read_csv(path, float_precision="round_trip")
+
+
+def compare_rows(published, fresh, columns=ACCURACY_COLUMNS, rtol: dict | None = None) -> list[str]:
+    """Differences between the rows of ``fresh`` and the same (method, scenario,
+    [condition,] seed) rows of ``published``, in ``columns``, compared exactly (NaN equals
+    NaN), or where ``rtol`` names a column's relative tolerance, within it.
+
+    Returns one line per missing row or differing value; empty when they agree.
+    """
+    rtol = rtol or {}
+    published, fresh = with_condition(published), with_condition(fresh)
+    keys = ["method", "scenario", "condition", "seed"]
+    pub = published.set_index(keys)
+    problems = []
+    for row in fresh.itertuples(index=False):
+        row = row._asdict()
+        key = tuple(row[k] for k in keys)
+        if key not in pub.index:
+            problems.append(f"{key}: not in the published rows")
+            continue
+        old = pub.loc[key]
+        for col in ("status",) + tuple(columns):
+            a, b = old[col], row[col]
+            if not _same(a, b, rtol.get(col)):
+                within = f" (beyond the relative tolerance {rtol[col]:g})" if col in rtol else ""
+                problems.append(f"{key} {col}: published {_plain(a)!r}, re-run {_plain(b)!r}{within}")
+    return problems
+
+
+def _same(a, b, rtol: float | None) -> bool:
+    both_float = isinstance(a, float) and isinstance(b, float)
+    if both_float and np.isnan(a) and np.isnan(b):
+        return True
+    if rtol is not None and both_float:
+        return abs(a - b) <= rtol * abs(a)
+    return a == b
+
+
+def _plain(value):
+    """A numpy scalar as the Python number it holds, so messages show ``0.1``, not ``np.float64(0.1)``."""
+    return value.item() if isinstance(value, np.generic) else value
+
+
+# What the tables can and cannot say; no numbers here, so nothing in it can go stale.
+READING_SIMULATED = """## Reading these tables
+
+- Every number comes from the simulator (`docs/physics.md`), not from a real joint. Its
+  ripple has the wave-generator orders 1, 2, 4, 6 and 8 with amplitudes affine in the load
+  and a small load-dependent phase, plus components locked to the output angle and strain
+  hysteresis. Under `same-session` the wave-generator part is exactly what the
+  calibration-map methods (`kalman-ripple`, `angle-adaptive-frozen`) identify on the
+  calibration log of the same device, so their result there is the best case for
+  model-based cancellation. The other conditions show what happens when the device has
+  changed since calibration: a power cycle loses the absolute angle until the first index
+  pulse, ageing drifts the map, re-assembly redraws it (`docs/physics.md`, "Deployment
+  conditions").
+- `realistic` is the same joint as `same-session` with the physics no method models turned on
+  at their documented sizes, in the calibration session too: gauge dynamics that change the
+  ripple with speed, a ripple that saturates with load and changes with the loaded tooth
+  flank, gauge warm-up within the session, an anti-alias filter and PWM pickup before the
+  ADC, encoder edge errors, eccentricity and missed counts (`docs/physics.md`, "Beyond the
+  methods' models"). It is where a method that wins only because the simulator's ripple has
+  the form it assumes would be found out; `results/sweeps/` varies each effect alone.
+- `torque_ref` (Table I's reference) is the paper's eq. (7) on the desired trajectory with
+  a nominal arm model whose masses and inertias differ from the simulated arm's by a few
+  per cent, as an identification leaves them.
+- `order-tracking` switches to the dead zone when no encoder position is crossed within
+  its trigger timeout, chosen on the calibration scenario (`docs/methods/order-tracking.md`).
+- `delay_ms` is the lag that best correlates estimate and truth, `n/a` where the
+  correlation peak is not distinct (slowly varying torque); `step_latency_ms` and
+  `bandwidth_hz` measure latency and bandwidth where the scenario defines them
+  (`docs/metrics.md`).
+- Timing columns depend on the machine and its load; compare methods within one run."""
+
+READING_RECORDED = """## Reading these tables
+
+- Every number comes from the recorded log named in the scenario column (`log:NAME`),
+  scored against its `torque_ref` column (and `torque_true` where the log has one); one log
+  is one device, so there are no intervals over devices.
+- The `calibration` column of `results.csv` says what each method was fitted on; `self`
+  means the scored log itself, which is not a fair test of any method.
+- Timing columns depend on the machine and its load; compare methods within one run."""
+
+
+def readme_markdown(frame, prov: dict, figures: dict, *, published: bool = False,
+                    run_dir: str = "DIR") -> str:
+    """``README.md`` of a report: every number from ``frame`` or ``prov``.
+
+    ``published`` is True only for the comparison in the repository's ``results/``
+    (``rippleb report ... --published``): only then does the title say so.
+    """
+    recorded = is_recorded(frame)
+    parts = title_lines(published, recorded, run_dir) + ["", counts_sentence(frame, recorded),
+                                                         "", environment_sentence(prov.get("run", {}))]
+    if not recorded:
+        parts += ["", prov.get("sealed") or sealed_text(frame, prov.get("run", {}))]
+    parts += ["", READING_RECORDED if recorded else READING_SIMULATED]
+    parts += ["", tables_markdown(frame)]
+    if "us_per_tick_p99" in frame:
+        parts += ["", "## How timing was taken", "", timing_note(prov, frame)]
+    if figures:
+        parts += ["", "## Figures", ""]
+        for name, (path, caption) in figures.items():
+            parts += [f"### {caption}", "", f"![{name}](figures/{path.name})", ""]
+    parts += ["", "## Provenance", "", provenance_markdown(prov), ""]
+    return "\n".join(parts)
+
+
+def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, argv=None,
+           published: bool = False, html: bool = False, figure_format: str = "png",
+           speed_seeds: int | None = None) -> dict:
+    """Write the report of ``run_dir`` into ``out`` (default ``run_dir/report``).
+
+    Parameters
+    ----------
+    run_dir
+        A directory written by ``rippleb run`` (``results.csv``, ``run.json``,
+        ``provenance.json``).
+    out
+        Output directory: ``README.md``, ``results.csv``, ``provenance.json``, ``figures/``
+        and, with ``html``, ``index.html``.
+    figures
+        Also draw the figures (those with signals re-simulate ``figure_seed``).
+    argv
+        The command line of the report, for the provenance (default ``sys.argv[1:]``).
+    published
+        Title and caveats of the project's published comparison (``results/``).
+    html
+        Also write the self-contained interactive ``index.html``.
+    figure_format
+        ``png``, ``svg`` or ``pdf``.
+    speed_seeds
+        The error-against-speed figure averages the first ``speed_seeds`` seeds of the run
+        (default: all of them; each is re-simulated and re-streamed).
+
+    Returns
+    -------
+    dict
+        ``{"readme": path, "csv": path, "provenance": path, "html": path or None,
+        "figures": {name: path}, "warnings": [...]}``
+    """
+    run_dir = Path(run_dir)
+    frame = load_rows(run_dir)
+    out = Path(out) if out is not None else run_dir / "report"
+    _mkdir(out)
+    try:
+        return _write_report(run_dir, out, frame, figures=figures, figure_seed=figure_seed, argv=argv,
+                             published=published, html=html, figure_format=figure_format,
+                             speed_seeds=speed_seeds)
+    except OSError as exc:  # a full disk or a quota while writing figures: one line, not a traceback
+        raise InputError(f"{exc.filename or out}: cannot write the report: {exc.strerror or exc}") from None
+
+
+def _write_report(run_dir: Path, out: Path, frame, *, figures, figure_seed, argv, published, html,
+                  figure_format, speed_seeds) -> dict:
+    prov = {"run": read_run_provenance(run_dir), "report": collect_provenance(argv),
+            "published": published, "seeds": sorted(int(s) for s in frame["seed"].unique()),
+            "seeds_text": seeds_text(frame["seed"].unique()), "rows": len(frame),
+            "statuses": {k: int(v) for k, v in frame["status"].value_counts().items()}}
+    for col in ("rippleb_version", "python", "cpu"):
+        values = sorted(str(v) for v in frame[col].dropna().unique()) if col in frame else []
+        prov[f"rows_{col}"] = ", ".join(values) or "not recorded"
+    prov["run_dir"] = str(run_dir)
+    prov["sealed"] = sealed_text(frame, prov["run"])
+    drawn, warnings, signals = {}, environment_warnings(frame, prov["run"]), {}
+    if prov["sealed"].startswith("Partly"):
+        warnings.append(prov["sealed"])
+    if figures and swept_columns(frame.columns):
+        # a sweep is read through error against each swept parameter; the signal figures
+        # would show the built-in scenarios at values the sweep did not hold fixed
+        from rippleb.report.sweep_report import figures as sweep_figures
+
+        drawn = sweep_figures(frame, out / "figures")
+    elif figures:
+        from rippleb.report import figures as figs
+
+        seeds = sorted(int(s) for s in frame["seed"].unique())
+        drawn, figure_warnings = figs.draw_all(frame, out / "figures", seed=figure_seed, fmt=figure_format,
+                                        speed_seeds=seeds[:speed_seeds] if speed_seeds else seeds,
+                                        keep=signals)
+        warnings += figure_warnings
+    prov["figure_seed"] = figure_seed if figures else None
+    # A byte copy, not a rewrite: re-printing parsed floats could change their last digit,
+    # and tests/test_published.py compares them exactly. Only of the rows reported: those
+    # a reader dropped (not rippleb's, or cut short) stay out of the copy too.
+    with atomic_path(out / "results.csv") as tmp:
+        copy_rows(run_dir / "results.csv", tmp, {row_key(r) for r in frame.to_dict("records")})
+    _write(out / "provenance.json", json.dumps(prov, indent=1, default=str) + "\n")
+    _write(out / "README.md", readme_markdown(frame, prov, drawn, published=published, run_dir=str(run_dir)))
+    page = None
+    if html:
+        from rippleb.report.html_report import write_html
+
+        page = write_html(frame, prov, out / "index.html", figure_seed=figure_seed if figures else None,
+                          signals=signals)
+    return {"readme": out / "README.md", "csv": out / "results.csv", "provenance": out / "provenance.json",
+            "html": page, "figures": {k: v[0] for k, v in drawn.items()}, "warnings": warnings}
+
+
+def _mkdir(path: Path) -> None:
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None
+
+
+def _write(path: Path, text: str) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)

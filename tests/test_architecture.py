@@ -1,0 +1,219 @@
+"""The package's shape (docs/architecture.md), checked on the source with :mod:`ast`.
+
+* a module imports only from its own layer or a lower one:
+  core < simulator < engine < report < cli < api;
+* no import circle between modules (imports inside functions count: a circle that only
+  works because one side imports late is still a circle);
+* no module imports a private name (``_name``) from another subpackage, nor reaches one as
+  an attribute of a module it imported: what a subpackage shares, it makes public;
+* no module is longer than :data:`MAX_LINES` lines.
+
+No module is imported here: the checks read the source, so they take milliseconds.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1] / "rippleb"
+MAX_LINES = 400
+
+#: The layers, lowest first; a module may import from its own layer and the ones before it.
+LAYERS = ("core", "simulator", "engine", "report", "cli", "api")
+#: Top-level modules outside the core. The scenario modules stand with the simulator: a
+#: scenario is checked against the arm it names (rippleb.simulator.robot). The package
+#: itself, ``python -m rippleb`` and the plugin authors' checks stand on everything.
+TOP_LEVEL_LAYER = {
+    "rippleb.scenario": "simulator",
+    "rippleb.scenario_types": "simulator",
+    "rippleb.profiles": "simulator",
+    "rippleb.mismatch": "simulator",
+    "rippleb": "api",
+    "rippleb.__main__": "api",
+    "rippleb.testing": "api",
+}
+SUBPACKAGE_LAYER = {"rippleb.simulator": "simulator", "rippleb.engine": "engine",
+                    "rippleb.report": "report", "rippleb.cli": "cli"}
+
+
+def module_name(path: Path, root: Path = ROOT) -> str:
+    parts = list(path.relative_to(root.parent).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def sources(root: Path = ROOT) -> dict[str, Path]:
+    """``{module name: path}`` of every module of the package under ``root``."""
+    return {module_name(p, root): p for p in sorted(root.rglob("*.py")) if "__pycache__" not in p.parts}
+
+
+def subpackage(module: str) -> str:
+    """``rippleb.engine`` for ``rippleb.engine.runner``; ``rippleb`` for a top-level module."""
+    for package in SUBPACKAGE_LAYER:
+        if module == package or module.startswith(package + "."):
+            return package
+    return "rippleb"
+
+
+def layer(module: str) -> str:
+    if module in TOP_LEVEL_LAYER:
+        return TOP_LEVEL_LAYER[module]
+    return SUBPACKAGE_LAYER.get(subpackage(module), "core")
+
+
+def private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def imports(module: str, path: Path, known: set[str]) -> tuple[list[tuple[str, int]], list[tuple[str, str, int]]]:
+    """``(edges, names)`` of one module: the rippleb modules it imports, anywhere in its body
+    (with the line), and the names it takes from them, imported or reached as attributes."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    edges, names, bound = [], [], {}
+
+    def target(base: str, name: str, line: int) -> None:
+        full = f"{base}.{name}"
+        if full in known:              # `from rippleb.engine import runner`: the module
+            edges.append((full, line))
+            bound[name] = full
+        else:                          # `from rippleb.engine.runner import run`: a name of it
+            edges.append((base, line))
+            names.append((base, name, line))
+
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.split(".")[0] == "rippleb":
+                    edges.append((alias.name, node.lineno))
+                    if alias.asname:
+                        bound[alias.asname] = alias.name
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(anchor + ([base] if base else []))
+            if base.split(".")[0] != "rippleb":
+                continue
+            for alias in node.names:
+                target(base, alias.name, node.lineno)
+                if alias.asname and f"{base}.{alias.name}" in known:
+                    bound[alias.asname] = f"{base}.{alias.name}"
+        elif isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "_EXPORTS"
+                                                  for t in node.targets):
+            # rippleb._lazy.lazy_exports: names imported from these modules on first use
+            for key, value in zip(node.value.keys, node.value.values):
+                edges.append((value.value, node.lineno))
+                names.append((value.value, key.value, node.lineno))
+    for node in ast.walk(tree):   # `runner._seed_list` on a module imported as `runner`
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) \
+                and node.value.id in bound and private(node.attr):
+            names.append((bound[node.value.id], node.attr, node.lineno))
+    return [(m, line) for m, line in edges if m in known], names
+
+
+def graph(root: Path = ROOT):
+    found = sources(root)
+    known = set(found)
+    return found, {m: imports(m, p, known) for m, p in found.items()}
+
+
+def layer_violations(deps) -> list[str]:
+    rank = {name: i for i, name in enumerate(LAYERS)}
+    return [f"{m} (layer {layer(m)}) imports {d} (layer {layer(d)}), line {line}"
+            for m, (edges, _) in deps.items() for d, line in edges if rank[layer(d)] > rank[layer(m)]]
+
+
+def cycles(deps) -> list[list[str]]:
+    """The import circles: strongly connected components of more than one module (Tarjan)."""
+    graph_ = {m: sorted({d for d, _ in edges if d != m}) for m, (edges, _) in deps.items()}
+    index, low, stack, on_stack, found = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph_[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph_):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def private_violations(deps) -> list[str]:
+    return [f"{m} takes the private name {name} from {source}, line {line}"
+            for m, (_, names) in deps.items() for source, name, line in names
+            if private(name) and subpackage(source) != subpackage(m)]
+
+
+def long_modules(found) -> list[str]:
+    lengths = {m: len(p.read_text().splitlines()) for m, p in found.items()}
+    return [f"{m}: {n} lines (at most {MAX_LINES})" for m, n in sorted(lengths.items()) if n > MAX_LINES]
+
+
+def test_no_lower_layer_imports_a_higher_one():
+    _, deps = graph()
+    found = layer_violations(deps)
+    assert not found, "a lower layer imports a higher one (docs/architecture.md):\n" + "\n".join(found)
+
+
+def test_no_import_circles():
+    _, deps = graph()
+    found = cycles(deps)
+    assert not found, "import circles:\n" + "\n".join(" <-> ".join(c) for c in found)
+
+
+def test_no_private_name_crosses_a_subpackage():
+    _, deps = graph()
+    found = private_violations(deps)
+    assert not found, "make the name public in its subpackage:\n" + "\n".join(found)
+
+
+def test_no_module_is_longer_than_the_limit():
+    found, _ = graph()
+    long = long_modules(found)
+    assert not long, "split these along their concepts:\n" + "\n".join(long)
+
+
+def test_the_checks_see_what_they_forbid(tmp_path):
+    """Each check fails on a small package that breaks its rule (so a check that silently
+    saw nothing, e.g. after the package moved, would be noticed)."""
+    pkg = tmp_path / "rippleb"
+    for rel, text in {
+        "__init__.py": "",
+        "errors.py": "from rippleb.engine.runner import run\n",                      # core -> engine
+        "engine/__init__.py": "",
+        "engine/runner.py": "def run():\n    from rippleb.engine import rows\n",     # a circle ...
+        "engine/rows.py": "from rippleb.engine.runner import run\n",                 # ... of two
+        "report/__init__.py": "",
+        "report/tables.py": "from rippleb.engine import runner\nrunner._seed_list\n"
+                            "from rippleb.engine.rows import _split\n" + "x = 1\n" * MAX_LINES,
+    }.items():
+        (pkg / rel).parent.mkdir(parents=True, exist_ok=True)
+        (pkg / rel).write_text(text)
+    found, deps = graph(pkg)
+    assert layer_violations(deps) == ["rippleb.errors (layer core) imports rippleb.engine.runner "
+                                      "(layer engine), line 1"]
+    assert cycles(deps) == [["rippleb.engine.rows", "rippleb.engine.runner"]]
+    assert sorted(private_violations(deps)) == [
+        "rippleb.report.tables takes the private name _seed_list from rippleb.engine.runner, line 2",
+        "rippleb.report.tables takes the private name _split from rippleb.engine.rows, line 3"]
+    assert long_modules(found) == [f"rippleb.report.tables: {MAX_LINES + 3} lines (at most {MAX_LINES})"]

@@ -19,9 +19,8 @@ finished rows kept); :func:`ignore_from_now` is for a program whose command is o
 
 from __future__ import annotations
 
-import contextlib
 import signal
-import threading
+import sys
 
 #: Signals received since :func:`handling` was entered (outermost).
 _RECEIVED: list[int] = []
@@ -36,6 +35,27 @@ def _handler(signum, frame):
     if not _HELD[0] and not _RAISED[0]:
         _RAISED[0] = True
         raise KeyboardInterrupt(f"signal {signum}")
+
+
+def _program_argv(argv) -> bool:
+    """The ``rippleb`` program's command line: ``python -m rippleb ...`` or its script."""
+    if any(a == "-m" and b == "rippleb" for a, b in zip(argv, argv[1:])):
+        return True
+    script = next((a for a in argv[1:] if not a.startswith("-")), "")
+    return script.rsplit("/", 1)[-1] == "rippleb"
+
+
+# The program holds signals from here, before this module imports anything that is not
+# built in: a Ctrl-C while ``contextlib`` and ``threading`` load (milliseconds, from disk)
+# would otherwise be a traceback from rippleb's first lines (once in 48 random moments in CI).
+if _program_argv(list(getattr(sys, "orig_argv", []))) and signal.getsignal(signal.SIGTERM) is not _handler:
+    signal.signal(signal.SIGTERM, _handler)
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _handler)
+    _HELD[0] += 1
+
+import contextlib  # noqa: E402
+import threading  # noqa: E402
 
 
 def received() -> bool:
@@ -131,14 +151,7 @@ def is_the_program() -> bool:
     ``sys.argv``: multiprocessing's spawned children (a local Dask cluster's workers) are
     given their parent's ``sys.argv``, and must keep their signals.
     """
-    import os
-    import sys
-
-    argv = list(getattr(sys, "orig_argv", []))
-    if any(a == "-m" and b == "rippleb" for a, b in zip(argv, argv[1:])):
-        return True
-    script = next((a for a in argv[1:] if not a.startswith("-")), "")
-    return os.path.basename(script) == "rippleb"
+    return _program_argv(list(getattr(sys, "orig_argv", [])))
 
 
 def install() -> dict:

@@ -82,6 +82,13 @@ def main(argv: list[str] | None = None) -> int:
         except KeyboardInterrupt:
             print(f"rippleb: interrupted{_interrupted(args)}", file=sys.stderr)
             return 130
+        except Exception:
+            # A signal raised inside a C extension's import can reach us as another
+            # exception (an ImportError wrapping the KeyboardInterrupt): still an interrupt.
+            if not interrupts.received():
+                raise
+            print(f"rippleb: interrupted{_interrupted(args)}", file=sys.stderr)
+            return 130
 
 
 def _interrupted(args) -> str:

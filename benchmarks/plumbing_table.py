@@ -12,8 +12,6 @@ the key for row hashes in it (``RIPPLEB_KEY_FILE``).
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import json
 import os
 import subprocess
@@ -24,6 +22,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from test_bad_input import _dist  # noqa: E402
 from test_plumbing import PROBER  # noqa: E402
+from test_row_integrity import _rows, _write_rows  # noqa: E402
 
 
 def _cli(code: str | None, where: Path, site: Path, *args, env_extra=None):
@@ -62,18 +61,6 @@ def probe(code, site) -> list[str]:
     ]
 
 
-def _rows(path):
-    return list(csv.DictReader(io.StringIO(path.read_text())))
-
-
-def _write(path, rows):
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=list(rows[0]), lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
-    path.write_text(buffer.getvalue())
-
-
 def edits(code, site) -> list[str]:
     out = []
     for case in ("an edited cell", "a forged row", "run.json's seeds changed"):
@@ -84,9 +71,9 @@ def edits(code, site) -> list[str]:
         rows = _rows(run / "results.csv")
         if case == "an edited cell":
             rows[0]["rms_error_nm"] = "0.001"
-            _write(run / "results.csv", rows)
+            _write_rows(run / "results.csv", rows)
         elif case == "a forged row":
-            _write(run / "results.csv", rows + [dict(rows[0], seed="9", rms_error_nm="0.001")])
+            _write_rows(run / "results.csv", rows + [dict(rows[0], seed="9", rms_error_nm="0.001")])
         else:
             config = json.loads((run / "run.json").read_text())
             config["seeds"] = list(range(6))

@@ -5,13 +5,37 @@ The public API is re-exported here; see the README for the CLI.
 
 from __future__ import annotations
 
-from rippleb import interrupts as _interrupts
+import _signal  # the C module: signal.py builds enums, milliseconds in which a Ctrl-C is a traceback
+import sys as _sys
 
-if _interrupts.is_the_program():
+_early_signals: list[int] = []
+
+
+def _is_the_program(argv: list[str]) -> bool:
+    """The ``rippleb`` program itself: ``python -m rippleb`` or its console script. Read
+    from the command line the process started with (``sys.orig_argv``): multiprocessing's
+    spawned children (a local Dask cluster's workers) get their parent's ``sys.argv`` and
+    must keep their signals."""
+    if any(a == "-m" and b == "rippleb" for a, b in zip(argv, argv[1:])):
+        return True
+    script = next((a for a in argv[1:] if not a.startswith("-")), "")
+    return script.rsplit("/", 1)[-1] == "rippleb"
+
+
+if _is_the_program(list(getattr(_sys, "orig_argv", []))):
     # The `rippleb` command: from its first line, Ctrl-C and SIGTERM are recorded, and
     # raised where the command can report them in one line (rippleb.cli.entry), not as a
-    # traceback from the middle of an import. Importing rippleb as a library does not do this.
-    _interrupts.hold_from_start()
+    # traceback from the middle of an import. Noted here with built-ins only, before any
+    # module is read from disk (a Ctrl-C while rippleb.interrupts loaded was a traceback:
+    # 2 of 150 random moments under 0.4 s). Importing rippleb as a library does not do this.
+    for _signum in (_signal.SIGTERM, _signal.SIGINT):
+        if _signum == _signal.SIGTERM or _signal.getsignal(_signum) is _signal.default_int_handler:
+            _signal.signal(_signum, lambda signum, frame: _early_signals.append(signum))
+    from rippleb import interrupts as _interrupts
+
+    _interrupts.hold_from_start(_early_signals)
+else:
+    from rippleb import interrupts as _interrupts  # noqa: F401 - rippleb.interrupts, as a program has it
 
 from rippleb import numerics  # noqa: E402
 

@@ -19,8 +19,9 @@ finished rows kept); :func:`ignore_from_now` is for a program whose command is o
 
 from __future__ import annotations
 
+import contextlib
 import signal
-import sys
+import threading
 
 #: Signals received since :func:`handling` was entered (outermost).
 _RECEIVED: list[int] = []
@@ -37,25 +38,6 @@ def _handler(signum, frame):
         raise KeyboardInterrupt(f"signal {signum}")
 
 
-def _program_argv(argv) -> bool:
-    """The ``rippleb`` program's command line: ``python -m rippleb ...`` or its script."""
-    if any(a == "-m" and b == "rippleb" for a, b in zip(argv, argv[1:])):
-        return True
-    script = next((a for a in argv[1:] if not a.startswith("-")), "")
-    return script.rsplit("/", 1)[-1] == "rippleb"
-
-
-# The program holds signals from here, before this module imports anything that is not
-# built in: a Ctrl-C while ``contextlib`` and ``threading`` load (milliseconds, from disk)
-# would otherwise be a traceback from rippleb's first lines (once in 48 random moments in CI).
-if _program_argv(list(getattr(sys, "orig_argv", []))) and signal.getsignal(signal.SIGTERM) is not _handler:
-    signal.signal(signal.SIGTERM, _handler)
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
-        signal.signal(signal.SIGINT, _handler)
-    _HELD[0] += 1
-
-import contextlib  # noqa: E402
-import threading  # noqa: E402
 
 
 def received() -> bool:
@@ -134,24 +116,19 @@ def handling():
         _reset()
 
 
-def hold_from_start() -> None:
-    """Install the handler with signals held, from the first line of the ``rippleb``
-    program (``rippleb/__init__.py`` calls this when the process is that program), so that
-    a signal during its imports is recorded rather than raised where no one can report it;
-    :func:`install`, in :func:`rippleb.cli.entry`, ends the hold and keeps the record."""
+def hold_from_start(early: list[int] = ()) -> None:
+    """Install the handler with signals held, for the ``rippleb`` program
+    (``rippleb/__init__.py`` calls this), so that a signal during its imports is recorded
+    rather than raised where no one can report it; ``early`` are the signals the package's
+    first lines noted before this module loaded. :func:`install`, in
+    :func:`rippleb.cli.entry`, ends the hold and keeps the record."""
     if not _installed():
-        install()
-        _HELD[0] += 1
-
-
-def is_the_program() -> bool:
-    """True in the ``rippleb`` program itself: its console script, or ``python -m rippleb``.
-
-    Read from the command line this process was started with (``sys.orig_argv``), not from
-    ``sys.argv``: multiprocessing's spawned children (a local Dask cluster's workers) are
-    given their parent's ``sys.argv``, and must keep their signals.
-    """
-    return _program_argv(list(getattr(sys, "orig_argv", [])))
+        _reset()
+        _HELD[0] += 1   # first: a signal right after the handler is in place is held
+        signal.signal(signal.SIGTERM, _handler)
+        if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:   # ignored: a background process
+            signal.signal(signal.SIGINT, _handler)
+    _RECEIVED.extend(early)
 
 
 def install() -> dict:

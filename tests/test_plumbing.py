@@ -171,7 +171,11 @@ def _write_into_keeper(garbage: bytes) -> bytes:
     namespace. Returns whether it could."""
     keeper = os.getppid()
     wrote = 0
-    for fd in os.listdir(f"/proc/{keeper}/fd"):
+    try:
+        fds = os.listdir(f"/proc/{keeper}/fd")
+    except OSError:   # not dumpable, and this worker may not look (unprivileged)
+        fds = []
+    for fd in fds:
         try:
             if os.readlink(f"/proc/{keeper}/fd/{fd}").startswith("pipe:"):
                 with open(f"/proc/{keeper}/fd/{fd}", "wb", buffering=0) as fh:

@@ -121,6 +121,12 @@ def undumpable():
                 _libc().prctl(PR_SET_DUMPABLE, was, 0, 0, 0)
 
 
+def dumpable_again() -> None:
+    """Undo :func:`not_dumpable` in this process (a confined worker, seen by no one)."""
+    with contextlib.suppress(OSError, AttributeError):
+        _libc().prctl(PR_SET_DUMPABLE, 1, 0, 0, 0)
+
+
 def not_dumpable() -> None:
     """Make this process (and what it forks) not dumpable: a process of the same user
     without ``CAP_SYS_PTRACE`` over it can then neither read its memory nor open its file

@@ -129,6 +129,11 @@ def _confine(read_only) -> None:
     if missing:
         print(f"rippleb: this worker is not confined: no {', no '.join(missing)} (the kernel refused)",
               file=sys.stderr)
+    else:
+        # Its own /proc, in its own PID namespace: no other process can name it, so it may
+        # be dumpable again, as a plain process is (a method that reads /proc/self/mem, /environ
+        # or /io as an unprivileged user; those files belong to root in a process that is not).
+        isolation.dumpable_again()
 
 
 def _keep_inherited_pages_shared() -> None:

@@ -65,19 +65,29 @@ def cmd_run(args) -> int:
 def recorded(args, body) -> int:
     """Run ``body(args, start)`` (a run or a sweep) and record its provenance, with whether
     it completed, in the run directory however it ends."""
-    from rippleb.report.provenance import collect_provenance
-    from rippleb.engine.sealing import redact
+    from rippleb import interrupts
 
-    start = time.perf_counter()
-    provenance = collect_provenance(redact(args.argv))  # no pointer to a salt file in the run directory
-    completed = False
-    try:
-        status = body(args, start)
-        completed = True
-        return status
-    finally:
-        provenance["completed"] = completed
-        _record_run(args, provenance, time.perf_counter() - start)
+    # Held from here, as the runner holds them: its heavy imports, the provenance and the
+    # checks before the run raise a signal at their next check, never where it lands. Raised
+    # there, in a finalizer or a callback run during an import, Python printed it as
+    # "Exception ignored", dropped it, and the run went on to claim its directory (once in
+    # CI's random-moment trials). The runner checks before it claims anything, and its waits
+    # poll; a run cut short by a signal here says so in one line, exit 130.
+    with interrupts.held():
+        from rippleb.report.provenance import collect_provenance
+        from rippleb.engine.sealing import redact
+
+        start = time.perf_counter()
+        provenance = collect_provenance(redact(args.argv))  # no pointer to a salt file in the run directory
+        interrupts.check_interrupted()
+        completed = False
+        try:
+            status = body(args, start)
+            completed = True
+            return status
+        finally:
+            provenance["completed"] = completed
+            _record_run(args, provenance, time.perf_counter() - start)
 
 
 def _record_run(args, provenance: dict, wall_s: float) -> None:

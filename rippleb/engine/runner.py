@@ -266,6 +266,7 @@ def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, pro
     # done (rippleb.interrupts): the loops between jobs and the waits, which poll. So an
     # interrupt never orphans a job, a half-claimed run directory or a temporary file.
     with interrupts.handling(), interrupts.held(), isolation.undumpable():
+        interrupts.check_interrupted()   # one that came while the run was prepared: nothing claimed yet
         if executor is not None and hasattr(executor, "check"):
             with interrupts.raising():  # a bad address is bad input: refused before the directory is claimed
                 executor.check()

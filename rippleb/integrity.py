@@ -141,8 +141,7 @@ def check_config(config: dict, path: Path) -> None:
     secret = key(create=False)
     if not _ours(seal, secret, path):
         return
-    expected = _mac(secret, b"run", str(seal.get("nonce")).encode(), _config_body(config))
-    if not hmac.compare_digest(expected, str(seal.get("mac"))):
+    if not _config_intact(secret, config):
         raise InputError(f"{path}: changed since rippleb wrote it (its keyed hash does not match); "
                          f"rippleb will not resume a run it cannot vouch for: start it again with another --out")
 
@@ -214,27 +213,38 @@ class Ledger:
                                + "".join(self.mac(row) + "\n" for row in rows), encoding="ascii")
 
 
-def _read_seal(run_dir: Path):
+def _config_intact(secret: bytes, config: dict) -> bool:
+    """Whether ``config`` (a run.json with its integrity field) is as rippleb wrote it."""
+    seal = config["integrity"]
+    expected = _mac(secret, b"run", str(seal.get("nonce")).encode(), _config_body(config))
+    return hmac.compare_digest(expected, str(seal.get("mac")))
+
+
+def _read_config(run_dir: Path) -> dict:
+    """``run_dir/run.json``, or {} where it cannot be read as an object."""
     try:
         config = json.loads((run_dir / "run.json").read_text())
     except (OSError, ValueError):
-        return None
-    return config.get("integrity") if isinstance(config, dict) else None
+        return {}
+    return config if isinstance(config, dict) else {}
+
+
+def _read_seal(run_dir: Path):
+    return _read_config(run_dir).get("integrity")
 
 
 def verified_rows(run_dir: Path, rows: list[dict], results_path: Path) -> list[dict]:
     """``rows`` without those rippleb did not write into ``run_dir``, with one warning
     naming how many and the first; all of them (and at most one warning) where the
     directory cannot be checked here."""
-    seal = _read_seal(Path(run_dir))
+    config = _read_config(Path(run_dir))
+    seal = config.get("integrity")
     if seal is None:
         return rows   # a run from before MACs, or made where no key could be written
     secret = key(create=False)
     if not _ours(seal, secret, Path(run_dir) / "run.json"):
         return rows
-    config = json.loads((Path(run_dir) / "run.json").read_text())
-    if not hmac.compare_digest(_mac(secret, b"run", str(seal.get("nonce")).encode(), _config_body(config)),
-                               str(seal.get("mac"))):
+    if not _config_intact(secret, config):
         warnings.warn(f"{Path(run_dir) / 'run.json'}: changed since rippleb wrote it (its keyed hash does not "
                       f"match); what it says of the run (seeds, selection) is not rippleb's", IntegrityWarning,
                       stacklevel=3)

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from conftest import HANG_TIMEOUT_S
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.slow
@@ -111,7 +112,7 @@ def test_installed_plugins_are_listed_with_their_origin(site):
 def test_misbehaving_plugins_get_their_status_and_the_others_complete(site, tmp_path):
     out = tmp_path / "run"
     proc = rippleb(site, "run", "--methods", "median,raises,nans,short,sleeps,chatty,broken-one,raw",
-                   "--scenarios", "static-contact", "--seeds", "1", "--jobs", "2", "--timeout", "6",
+                   "--scenarios", "static-contact", "--seeds", "1", "--jobs", "2", "--timeout", HANG_TIMEOUT_S,
                    "--out", out, "--no-progress")
     # the broken plugin's row is kept and the others ran, but the run says so and exits 1
     assert proc.returncode == 1, proc.stderr

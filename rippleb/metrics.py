@@ -25,6 +25,7 @@ RESTART_ANGLE_RAD = 4.0 * np.pi   # two wave-generator revolutions
 REST_HOLD_S = 0.010               # recorded logs: no encoder count for 10 ms is "at rest"
 DELAY_PEAK_FACTOR = 2.0           # delay_ms: lags whose misfit 1 - r is within 2x the best ...
 DELAY_PEAK_WIDTH_S = 0.025        # ... must all lie within 25 ms of it, else the peak is not distinct
+GEAR_TORQUE_FLOOR_NM = 1e-6      # gear_erased_fraction: below this RMS there is nothing to erase
 
 _MEMO: dict[int, dict] = {}       # id of a live Truth -> what Truth.remembered computed for it
 
@@ -33,7 +34,9 @@ _MEMO: dict[int, dict] = {}       # id of a live Truth -> what Truth.remembered 
 class Truth:
     """What the metrics compare an estimate with; the runner builds it, methods never see it.
 
-    ``torque_true`` and ``torque_ref`` may be None (a recorded log has no ``torque_true``).
+    ``torque_true`` and ``torque_ref`` may be None (a recorded log has no ``torque_true``);
+    ``torque_gear`` is the part of ``torque_true`` the gear's transmission error adds
+    (:mod:`rippleb.simulator.transmission`; None for a recording).
     ``moving``, ``wave_angle`` [rad] and ``eval_mask`` are per sample; ``fs`` in Hz.
     The scenario's known events (empty when it has none, or for a recording):
     ``steps`` rows ``(start, rise, change)`` [s, s, Nm] of the step loads' edges,
@@ -48,6 +51,7 @@ class Truth:
     wave_angle: np.ndarray
     torque_true: np.ndarray | None = None
     torque_ref: np.ndarray | None = None
+    torque_gear: np.ndarray | None = None
     steps: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     chirps: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
 
@@ -73,7 +77,8 @@ class Truth:
         log = sim.log
         truth = cls(fs=log.spec.fs, eval_mask=np.asarray(sim.eval_mask, bool),
                     moving=np.asarray(sim.moving, bool), wave_angle=np.asarray(sim.wave_angle, float),
-                    torque_true=log.torque_true, torque_ref=log.torque_ref)
+                    torque_true=log.torque_true, torque_ref=log.torque_ref,
+                    torque_gear=getattr(sim, "torque_gear", None))
         sc = getattr(sim, "scenario", None)   # a stand-in simulation may have none: no events
         if sc is None:
             return truth
@@ -121,6 +126,23 @@ def rms_error(estimate: np.ndarray, truth: np.ndarray | None, mask: np.ndarray) 
         return float("nan")
     err = estimate[mask] - truth[mask]
     return float(np.sqrt(np.mean(err * err)))
+
+
+def gear_erased(estimate: np.ndarray, truth: np.ndarray | None, gear: np.ndarray | None,
+                mask: np.ndarray) -> float:
+    """The fraction of the gear's real torque ``g`` (``torque_gear``) the estimate removed:
+    ``-sum_W e g / sum_W g^2``, the least-squares share of ``-g`` in the error ``e``.
+
+    0: the estimate carries ``g`` as the joint does; 1: it erased it (its error is ``-g``);
+    it may leave [0, 1] (a method that doubles ``g``, or turns it around). NaN without a
+    gear torque (ideal gear, recording)."""
+    if truth is None or gear is None or not mask.any():
+        return float("nan")
+    g = gear[mask]
+    power = float(np.dot(g, g))
+    if not power > GEAR_TORQUE_FLOOR_NM ** 2 * len(g):
+        return float("nan")
+    return float(-np.dot(estimate[mask] - truth[mask], g) / power)
 
 
 def max_error(estimate: np.ndarray, truth: np.ndarray | None, mask: np.ndarray) -> float:
@@ -278,10 +300,21 @@ def score(estimate: np.ndarray, truth: Truth) -> dict[str, float]:
         "step_latency_ms": step_latency_ms(estimate, truth),
         "restart_max_error_nm": restart_max_error(estimate, best, truth),
         "stopped_rms_error_nm": rms_error(estimate, best, rest),
+        "gear_torque_rms_nm": rms_error(np.zeros_like(estimate), truth.torque_gear, mask),
+        "gear_erased_fraction": gear_erased(estimate, truth.torque_true, truth.torque_gear, mask),
+        "rms_error_without_gear_nm": rms_error(estimate, _without_gear(truth), mask),
     }
+
+
+def _without_gear(truth: Truth) -> np.ndarray | None:
+    """``torque_true - torque_gear``: the torque of the same joint with an ideal gear."""
+    if truth.torque_true is None or truth.torque_gear is None:
+        return None
+    return truth.remembered("without_gear", lambda: truth.torque_true - truth.torque_gear)
 
 
 METRIC_COLUMNS = ("rms_error_nm", "max_error_nm", "rms_error_ref_nm", "max_error_ref_nm",
                   "delay_ms", "bandwidth_hz", "step_latency_ms", "restart_max_error_nm",
-                  "stopped_rms_error_nm",
+                  "stopped_rms_error_nm", "gear_torque_rms_nm", "gear_erased_fraction",
+                  "rms_error_without_gear_nm",
                   "us_per_tick_p50", "us_per_tick_p99", "samples_per_s")

@@ -36,7 +36,7 @@ from rippleb.streaming import InvalidOutput, prepare_blocks, stream
 
 #: Everything the metrics compare with: the per-sample arrays and events of
 #: :class:`~rippleb.metrics.Truth` (its own list) plus the two torque columns.
-TRUTH_ARRAYS = metrics.TRUTH_ARRAYS + ("torque_true", "torque_ref")
+TRUTH_ARRAYS = metrics.TRUTH_ARRAYS + ("torque_true", "torque_ref", "torque_gear")
 
 
 @dataclass(frozen=True)

@@ -80,7 +80,9 @@ def format_value(value) -> str:
     if isinstance(value, (int, float)):
         return repr(value)
     text = str(value)
-    return text if _BARE_WORD.fullmatch(text) and parse_value(text) == text else json.dumps(text)
+    if _BARE_WORD.fullmatch(text) and parse_value(text) == text:
+        return text
+    return json.dumps(text, ensure_ascii=False)
 
 
 def parse_value(text: str):
@@ -101,11 +103,12 @@ def parse_value(text: str):
 
 
 def split_top_level(text: str) -> list[str]:
-    """``text`` split at the commas outside brackets and quotes."""
-    parts, depth, quote, start = [], 0, "", 0
+    """``text`` split at the commas outside brackets and quotes (a backslash escapes a quote)."""
+    parts, depth, quote, start, escaped = [], 0, "", 0, False
     for i, char in enumerate(text):
         if quote:
-            quote = "" if char == quote else quote
+            quote = "" if char == quote and not escaped else quote
+            escaped = char == "\\" and not escaped
         elif char in "\"'":
             quote = char
         elif char == "[":

@@ -231,6 +231,8 @@ def signature_of(cls) -> dict:
     import inspect
 
     params, kwargs = {}, False
+    if cls.__init__ is object.__init__:  # no constructor of its own: it takes no parameter
+        return {"params": params, "kwargs": kwargs}
     for p in list(inspect.signature(cls.__init__).parameters.values())[1:]:
         if p.kind is p.VAR_KEYWORD:
             kwargs = True

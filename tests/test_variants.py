@@ -95,6 +95,14 @@ def test_a_parameter_the_constructor_refuses_is_one_line(params, words):
     assert all(word in str(info.value) for word in words), str(info.value)
 
 
+def test_a_method_without_a_constructor_takes_no_parameter():
+    from rippleb.methods.raw import Raw
+
+    assert signature_of(Raw) == {"params": {}, "kwargs": False}
+    with pytest.raises(InputError, match="method 'raw': unknown parameter 'window'"):
+        check_params(Variant("raw", {"window": 3}), signature_of(Raw))
+
+
 def test_an_integer_is_a_float_value_and_kwargs_take_any_name():
     check_params(Variant("order-tracking", {"q": 20, "dead_zone": False}), ORDER_TRACKING)
     check_params(Variant("m", {"anything": 1}), {"params": {}, "kwargs": True})

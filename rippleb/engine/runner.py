@@ -72,8 +72,9 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, s
     Parameters
     ----------
     methods
-        Method names (a list or ``"a,b"``); None for every built-in method, ``"all"`` for
-        every built-in and plugin method.
+        Method names (a list or ``"a,b"``), or variants (``"order-tracking[q=20,30]"``,
+        :mod:`rippleb.variants`); None for every built-in method, ``"all"`` for every
+        built-in and plugin method.
     scenarios
         Scenario names or paths to ``.toml`` files; None for every scored built-in.
     seeds

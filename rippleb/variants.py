@@ -30,6 +30,7 @@ Variant(name='lowpass', params={'cutoff_hz': 50.0, 'order': 4})
 from __future__ import annotations
 
 import ast
+import inspect
 import itertools
 import json
 import re
@@ -37,6 +38,7 @@ import tomllib
 from dataclasses import dataclass, field
 
 from rippleb.errors import InputError
+from rippleb.registry import unknown_name
 
 #: The types a parameter value may have on the command line.
 VALUE_TYPES = (bool, int, float, str)
@@ -185,10 +187,12 @@ def _values(method: str, param: str, text: str) -> list:
     except InputError as exc:
         raise InputError(f"method {method!r}: parameter {param!r}: {exc}") from None
     values = value if isinstance(value, list) else [value]
+    if not values:  # `p=[]` would silently select no variant at all
+        raise InputError(f"method {method!r}: parameter {param!r} has no value")
     for v in values:
         if not isinstance(v, VALUE_TYPES):
-            raise InputError(f"method {method!r}: parameter {param!r}: {v!r} is a "
-                             f"{type(v).__name__}; a value is a number, true/false or a string")
+            raise InputError(f"method {method!r}: parameter {param!r}: {v!r} is {_a(type(v).__name__)}; "
+                             f"a value is a number, true/false or a string")
     return values
 
 
@@ -209,13 +213,16 @@ def check_params(variant: Variant, signature: dict) -> None:
         if param not in known:
             if signature.get("kwargs"):
                 continue
-            from rippleb.registry import unknown_name
-
             raise InputError(f"method {variant.name!r}: " + unknown_name("parameter", param, list(known)))
         expected = known[param]
         if expected is not None and not _fits(value, expected):
             raise InputError(f"method {variant.name!r}: parameter {param!r} = {format_value(value)}: "
-                             f"expected a {expected} (the type of its default), got a {type(value).__name__}")
+                             f"expected {_a(expected)} (the type of its default), got {_a(type(value).__name__)}")
+
+
+def _a(type_name: str) -> str:
+    """``a float``, ``an int``."""
+    return f"{'an' if type_name[0] in 'aeiou' else 'a'} {type_name}"
 
 
 def _fits(value, expected: str) -> bool:
@@ -228,8 +235,6 @@ def signature_of(cls) -> dict:
     """What :func:`check_params` needs of ``cls``'s constructor, as plain JSON data (a child
     process sends it back): ``{"params": {name: type name of its default, or None when it
     has none or it is None}, "kwargs": whether it takes **kwargs}``."""
-    import inspect
-
     params, kwargs = {}, False
     if cls.__init__ is object.__init__:  # no constructor of its own: it takes no parameter
         return {"params": params, "kwargs": kwargs}

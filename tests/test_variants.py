@@ -48,7 +48,8 @@ def test_a_variant_given_twice_runs_once():
     ("m[20]", ["'m'", "'20' has no parameter name"]),
     ("m[q=1,q=2]", ["'m'", "'q' is given twice"]),
     ("m[q=@]", ["'m'", "parameter 'q'", "'@' is not a value"]),
-    ("m[q={a=1}]", ["'m'", "parameter 'q'", "dict"]),
+    ("m[q={a=1}]", ["'m'", "parameter 'q'", "is a dict"]),
+    ("m[q=[]]", ["'m'", "parameter 'q' has no value"]),
 ])
 def test_a_malformed_item_is_one_line_naming_the_method_and_the_parameter(text, words):
     with pytest.raises(InputError) as info:
@@ -87,7 +88,7 @@ def test_the_signature_of_a_method_names_each_parameter_with_its_defaults_type()
     ({"q": "abc"}, ["'order-tracking'", "parameter 'q'", "expected a float", "got a str"]),
     ({"q": True}, ["parameter 'q'", "got a bool"]),
     ({"orders": 2}, ["parameter 'orders'", "expected a tuple"]),
-    ({"dead_zone": 1}, ["parameter 'dead_zone'", "expected a bool", "got a int"]),
+    ({"dead_zone": 1}, ["parameter 'dead_zone'", "expected a bool", "got an int"]),
 ])
 def test_a_parameter_the_constructor_refuses_is_one_line(params, words):
     with pytest.raises(InputError) as info:

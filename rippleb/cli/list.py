@@ -16,8 +16,8 @@ PLUGIN_IMPORT_TIMEOUT_S = 20.0
 def add_list(sub) -> None:
     p = sub.add_parser("list", help="list methods, scenarios and deployment conditions, one line each",
                        description="List every method with its origin (builtin, plugin, or broken "
-                                   "with its import error) and what it does (the first line of its "
-                                   "docstring), every built-in scenario with whether it is scored and "
+                                   "with its import error) and what it does (its description, else "
+                                   "the first line of its class or module docstring), every built-in scenario with whether it is scored and "
                                    "what it tests (the first sentence of its description), and the "
                                    "deployment conditions. Plugins are imported in a child "
                                    "process, each under a timeout.")

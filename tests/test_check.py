@@ -112,3 +112,16 @@ def test_bad_input_is_one_line_and_exit_2(name, words):
     assert proc.returncode == 2, proc.stdout + proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and all(word in lines[0] for word in words), proc.stderr
+
+
+@pytest.mark.slow
+def test_a_plugin_that_fails_to_import_fails_the_import_check(tmp_path):
+    info = tmp_path / "gone-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: gone\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[rippleb.methods]\ngone = no_such_module:Gone\n")
+    proc = rippleb("check", "gone", path=tmp_path)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    lines = proc.stdout.splitlines()
+    assert lines[1].startswith("  FAIL  import") and "No module named 'no_such_module'" in lines[1]
+    assert len(lines) == 2

@@ -4,6 +4,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pandas as pd
 import pytest
 from hypothesis import given
@@ -75,6 +76,17 @@ def test_a_label_reads_back_as_the_same_variant(params):
     assert variant.name == "m" and variant.params == params
     assert [type(v) for v in variant.params.values()] == [type(v) for v in params.values()]
     assert variant.label == label("m", params)
+
+
+@given(st.dictionaries(parameter_names, st.lists(st.integers(-99, 99), min_size=1, max_size=3, unique=True),
+                       min_size=1, max_size=3))
+def test_an_item_names_one_variant_per_combination_of_its_values(grid):
+    item = "m[" + ",".join(f"{k}={','.join(map(str, v))}" for k, v in grid.items()) + "]"
+    variants = parse_methods(item)
+    assert len(variants) == np.prod([len(v) for v in grid.values()])
+    assert len({v.label for v in variants}) == len(variants)
+    assert variants[0].params == {k: v[0] for k, v in grid.items()}
+    assert variants[-1].params == {k: v[-1] for k, v in grid.items()}
 
 
 def test_the_signature_of_a_method_names_each_parameter_with_its_defaults_type():

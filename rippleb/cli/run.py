@@ -26,7 +26,8 @@ def add_run(sub) -> None:
                     "finishes. Defaults: every built-in method, every scored built-in scenario, "
                     f"{DEFAULT_SEEDS} seeds, out runs/<timestamp>/.")
     p.add_argument("--methods", help="comma-separated method names, or 'all' to add plugins "
-                                     "(default: every built-in method)")
+                                     "(default: every built-in method); 'NAME[p=1,2]' runs one variant "
+                                     "per value of a constructor parameter (docs/plugins.md)")
     p.add_argument("--scenarios", help="comma-separated scenario names or paths to .toml files "
                                        "(default: every scored built-in scenario)")
     p.add_argument("--conditions", metavar="A,B|all",

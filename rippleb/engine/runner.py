@@ -48,6 +48,7 @@ from rippleb.metrics import Truth, tick_stats
 from rippleb.engine.pool import Pool
 from rippleb.registry import Registry
 from rippleb.engine.executors import row_tasks
+from rippleb.engine.methods import base_name, resolve_methods
 from rippleb.engine.results import ResultsFile, RunWarning, row_key, say_other_versions
 from rippleb.engine.rows import (CALIBRATION, FITTING, MAX_SEEDS, SCORED, Case, RowKey, scenario_hash,
                                  select_conditions, select_scenarios, select_seeds, split_names)
@@ -71,8 +72,9 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, s
     Parameters
     ----------
     methods
-        Method names (a list or ``"a,b"``); None for every built-in method, ``"all"`` for
-        every built-in and plugin method.
+        Method names (a list or ``"a,b"``), or variants (``"order-tracking[q=20,30]"``,
+        :mod:`rippleb.variants`); None for every built-in method, ``"all"`` for every
+        built-in and plugin method.
     scenarios
         Scenario names or paths to ``.toml`` files; None for every scored built-in.
     seeds
@@ -246,20 +248,6 @@ def run_log(log, calibration=None, methods=None, *, jobs: int = 1, out=None,
                     config={"methods": names, "log": log_name, "conditions": [DEFAULT_CONDITION]})
 
 
-def resolve_methods(registry: Registry, methods) -> list[str]:
-    """Method names to run; unknown names raise :class:`InputError` with a suggestion."""
-    wanted = split_names(methods)
-    if methods is not None and not wanted:
-        raise InputError("--methods is empty; give method names or 'all'")
-    if not wanted:
-        return registry.names("builtin")
-    if wanted == ["all"]:
-        return registry.names()
-    for name in wanted:
-        registry.get(name)
-    return list(dict.fromkeys(wanted))
-
-
 def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, progress, config,
              on_start=None, executor=None, sealed=None, salt_file=None):
     # Signals are held from here on and raised only where stopping leaves nothing half
@@ -340,7 +328,7 @@ def _warm(registry, plan: Plan) -> None:
 
     for scenario, _ in plan.sims.values():
         robot.load_model(scenario.robot)
-    registry.load_builtins({key.method for key in plan.rows})
+    registry.load_builtins({base_name(key.method) for key in plan.rows})
 
 
 def default_out_dir() -> Path:

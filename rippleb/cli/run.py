@@ -148,10 +148,14 @@ def _run(args, start: float) -> int:
         _refuse_with_log(args)
         executor(args)  # refuses dask with --log
         args.out_dir = args.out or runner.default_out_dir()
-        logs = read_logs(args)
-        frame = runner.run_log(*logs, args.methods, jobs=args.jobs,
+        log, cal = read_logs(args)
+
+        def started_on_logs():  # the logs passed every check: say how they were read, then run
+            print(joint_block(args, log, cal), file=sys.stderr)
+            started()
+        frame = runner.run_log(log, cal, args.methods, jobs=args.jobs,
                                out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress,
-                               on_start=started)
+                               on_start=started_on_logs)
         if args.calibration is None:
             print("rippleb: warning: no --calibration: each method was fitted on the scored log "
                   "itself, not on a calibration recording; a log without motion both ways, a range "
@@ -241,8 +245,7 @@ def _refuse_without_log(args) -> None:
 
 
 def read_logs(args):
-    """The scored and the calibration log of ``--log``, read with ``--joint`` and ``--resample``;
-    then one block on stderr: every value the run uses, given or assumed."""
+    """The scored and the calibration log of ``--log``, read with ``--joint`` and ``--resample``."""
     from rippleb.data import read_log
     from rippleb.joint_file import load_joint
 
@@ -250,6 +253,11 @@ def read_logs(args):
     log = read_log(args.log, joint=joint, resample=args.resample)
     cal = None if args.calibration is None else read_log(args.calibration, spec=log.spec, joint=joint,
                                                          resample=args.resample)
+    return log, cal
+
+
+def joint_block(args, log, cal) -> str:
+    """One block for stderr: every value the logs were read with, given or assumed."""
     lines = [f"rippleb: {args.log.name}: read with these values (give the ASSUMED ones in --joint FILE, "
              f"docs/your-joint.md):", *log.meta["joint"]]
     if cal is not None:
@@ -258,5 +266,4 @@ def read_logs(args):
     if log.torque_ref is None and log.torque_true is None:
         lines.append(f"rippleb: warning: {args.log.name} has no reference torque (torque_ref): its rows "
                      f"get status no-reference; accuracy cannot be scored, cost can")
-    print("\n".join(lines), file=sys.stderr)
-    return log, cal
+    return "\n".join(lines)

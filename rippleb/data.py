@@ -184,7 +184,8 @@ def make_log(spec: JointSpec, columns: dict, *, source: str = "log", meta: dict 
     missing = [name for name in SENSOR_COLUMNS if name not in columns]
     if missing:
         raise InputError(f"{source}: missing column(s) {', '.join(missing)} "
-                         f"(a log needs {', '.join(SENSOR_COLUMNS)})")
+                         f"(a log needs {', '.join(SENSOR_COLUMNS)}; a DAQ's own names and units are "
+                         f"mapped in a joint file's [joint.columns], docs/your-joint.md)")
     arrays = {}
     for name in LOG_COLUMNS:
         if name not in columns or columns[name] is None:

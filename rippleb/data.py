@@ -268,7 +268,8 @@ def read_log(path: str | Path, spec: JointSpec | None = None, *, joint=None,
         encoder, current`` (or the columns its joint description maps onto them);
         ``index``, ``torque_ref`` and ``torque_true`` are optional.
     spec
-        The joint the log was recorded on, used as it is. By default :class:`JointSpec`
+        The joint the log was recorded on, used as it is (a joint description that gives
+        another value is refused). By default :class:`JointSpec`
         with the values the joint description gives and ``fs`` the mean rate of ``t``
         (:func:`rippleb.timebase.uniform_rate`).
     joint
@@ -306,10 +307,13 @@ def read_log(path: str | Path, spec: JointSpec | None = None, *, joint=None,
     if resample:
         columns = _resampled(columns, str(path))
     if spec is None:
-        spec = joint_file.with_spec(JointSpec(), description).validate(str(path))
+        spec = joint_file.with_spec(JointSpec(), description)
         fs = _rate(columns.get("t"))
         if np.isfinite(fs) and fs > 0:
             spec = dataclasses.replace(spec, fs=round(fs, 6))
+        spec.validate(str(path))
+    else:
+        joint_file.check_agrees(spec, description, str(path))
     log = make_log(spec, columns, source=str(path), meta={"source": str(path)})
     log.meta["joint"] = joint_file.describe(spec, description, units, log.index is not None)
     return log

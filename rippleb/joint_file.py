@@ -251,6 +251,16 @@ def describe(spec, joint: JointDescription, units: dict, index_used: bool) -> li
     return lines
 
 
+def check_agrees(spec, joint: JointDescription, source: str) -> None:
+    """Refuse a description that gives ``source`` another joint value than ``spec``, the
+    joint it is read with (a calibration log is read with the scored log's)."""
+    for key, value in spec_values(joint).items():
+        if getattr(spec, key) != value:
+            raise InputError(f"{joint.sources[key]}: joint.{key}: {value:g}, but {source} is read with "
+                             f"{key} = {getattr(spec, key):g} (one joint: a calibration log is read with the "
+                             f"scored log's values)")
+
+
 def with_spec(spec, joint: JointDescription):
     """``spec`` with the values ``joint`` gives."""
     return dataclasses.replace(spec, **spec_values(joint))

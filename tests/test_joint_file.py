@@ -204,3 +204,13 @@ def test_a_log_without_reference_is_its_own_status():
     assert row["status"] == NO_REFERENCE and "cannot be scored" in row["message"]
     assert np.isnan(row["rms_error_ref_nm"]) and np.isnan(row["rms_error_nm"])
     assert "status" not in score_or_invalid(np.ones(100), _truth(torque_ref=np.arange(100.0), torque_limit=510.0))
+
+
+def test_a_calibration_sidecar_that_names_another_joint_is_refused(tmp_path):
+    _frame().to_csv(tmp_path / "cal.csv", index=False)
+    _joint(tmp_path, "[joint]\ncounts_per_rev = 4096\n", "cal.toml")
+    with pytest.raises(InputError, match=r"cal.toml: joint.counts_per_rev: 4096, but .*cal.csv is read with "
+                                         r"counts_per_rev = 16384 \(one joint"):
+        read_log(tmp_path / "cal.csv", spec=JointSpec(counts_per_rev=16384))
+    _joint(tmp_path, "[joint]\ncounts_per_rev = 16384\n", "cal.toml")
+    assert read_log(tmp_path / "cal.csv", spec=JointSpec(counts_per_rev=16384)).spec.counts_per_rev == 16384

@@ -214,3 +214,28 @@ def test_a_calibration_sidecar_that_names_another_joint_is_refused(tmp_path):
         read_log(tmp_path / "cal.csv", spec=JointSpec(counts_per_rev=16384))
     _joint(tmp_path, "[joint]\ncounts_per_rev = 16384\n", "cal.toml")
     assert read_log(tmp_path / "cal.csv", spec=JointSpec(counts_per_rev=16384)).spec.counts_per_rev == 16384
+
+
+def test_lab_columns_and_their_joint_file_read_back_as_the_log(tmp_path):
+    """What ``rippleb simulate --format lab`` writes reads back, through its joint.toml, as
+    the log it came from; a joint.toml that says something else is kept and refused."""
+    from rippleb import make_log
+    from rippleb.data import write_columns
+    from rippleb.lab_format import joint_toml, lab_columns, write_joint_toml
+
+    frame = _frame(4000)
+    log = make_log(JointSpec(counts_per_rev=16384), {**frame.to_dict("series"), "index": frame.encoder % 97 == 0,
+                                                    "torque_true": frame.torque_ref})
+    columns = lab_columns(log)
+    assert list(columns) == ["t", "strain_mV", "enc_counts", "i_motor_A", "idx", "load_cell_Nm"]   # no truth
+    write_columns(columns, tmp_path / "rec.csv")
+    joint = write_joint_toml(joint_toml(log.spec, True), tmp_path / "joint.toml")
+    back = read_log(tmp_path / "rec.csv", joint=joint)
+    assert back.spec == log.spec and back.torque_true is None
+    for name in ("t", "strain", "current", "torque_ref"):
+        np.testing.assert_allclose(getattr(back, name), getattr(log, name), rtol=1e-12, atol=1e-15)
+    np.testing.assert_array_equal(back.encoder, log.encoder)
+    np.testing.assert_array_equal(back.index, log.index)
+    assert write_joint_toml(joint_toml(log.spec, True), joint) == joint   # the same text: fine
+    with pytest.raises(InputError, match="joint.toml: exists and describes another joint"):
+        write_joint_toml(joint_toml(JointSpec(), True), joint)

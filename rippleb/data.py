@@ -306,17 +306,24 @@ def read_log(path: str | Path, spec: JointSpec | None = None, *, joint=None,
         units.pop("index", None)
     if resample:
         columns = _resampled(columns, str(path))
-    if spec is None:
-        spec = joint_file.with_spec(JointSpec(), description)
-        fs = _rate(columns.get("t"))
-        if np.isfinite(fs) and fs > 0:
-            spec = dataclasses.replace(spec, fs=round(fs, 6))
-        spec.validate(str(path))
-    else:
+    if spec is not None:
         joint_file.check_agrees(spec, description, str(path))
-    log = make_log(spec, columns, source=str(path), meta={"source": str(path)})
-    log.meta["joint"] = joint_file.describe(spec, description, units, log.index is not None)
+    log = make_log(spec or _spec_from(description, columns, str(path)), columns, source=str(path),
+                   meta={"source": str(path)})
+    log.meta["joint"] = joint_file.describe(log.spec, description, units, log.index is not None,
+                                            spec_given=spec is not None)
     return log
+
+
+def _spec_from(description, columns: dict, source: str) -> JointSpec:
+    """:class:`JointSpec` with the values ``description`` gives and ``fs`` the mean rate of ``t``."""
+    from rippleb import joint_file
+
+    spec = joint_file.with_spec(JointSpec(), description)
+    fs = _rate(columns.get("t"))
+    if np.isfinite(fs) and fs > 0:
+        spec = dataclasses.replace(spec, fs=round(fs, 6))
+    return spec.validate(source)
 
 
 def _rate(t) -> float:

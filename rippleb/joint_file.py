@@ -237,12 +237,19 @@ def spec_values(joint: JointDescription) -> dict:
     return {k: v for k, v in joint.values.items() if k != "index_pulse"}
 
 
-def describe(spec, joint: JointDescription, units: dict, index_used: bool) -> list[str]:
-    """One line per value a log run uses: given (and where) or assumed (the default)."""
-    lines = [f"  fs = {spec.fs:.6g} Hz (from column t, its mean rate)"]
+def describe(spec, joint: JointDescription, units: dict, index_used: bool, *,
+             spec_given: bool = False) -> list[str]:
+    """One line per value a log run uses: given (and where) or assumed (the default).
+
+    ``spec_given``: ``spec`` was handed to ``read_log``, so its values are the caller's."""
+    default = "given as read_log's spec" if spec_given else "ASSUMED (rippleb's default)"
+    rate_origin = default if spec_given else "from column t, its mean rate"
+    lines = [f"  fs = {spec.fs:.6g} Hz ({rate_origin})"]
     for key in JOINT_KEYS:
         value = index_used if key == "index_pulse" else getattr(spec, key)
-        origin = f"given in {joint.sources[key]}" if key in joint.sources else "ASSUMED (rippleb's default)"
+        origin = f"given in {joint.sources[key]}" if key in joint.sources else default
+        if key == "index_pulse" and key not in joint.sources:
+            origin = "ASSUMED (from whether the log has an index column)"
         lines.append(f"  {key} = {value:g} ({origin})" if not isinstance(value, bool)
                      else f"  {key} = {str(value).lower()} ({origin})")
     for name, info in units.items():

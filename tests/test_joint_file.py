@@ -68,6 +68,8 @@ def test_without_a_joint_file_every_value_is_said_to_be_assumed(tmp_path):
     assert "counts_per_rev = 2500 (ASSUMED (rippleb's default))" in said
     assert "column strain = 'strain' in V (ASSUMED" in said
     assert "index_pulse = false (ASSUMED" in said
+    given = "\n".join(read_log(tmp_path / "rec.csv", spec=JointSpec(counts_per_rev=16384)).meta["joint"])
+    assert "counts_per_rev = 16384 (given as read_log's spec)" in given and "(ASSUMED (rippleb's default))" not in given
 
 
 def test_a_sidecar_overrides_the_joint_file_key_by_key(tmp_path):

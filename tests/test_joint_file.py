@@ -241,3 +241,10 @@ def test_lab_columns_and_their_joint_file_read_back_as_the_log(tmp_path):
     assert write_joint_toml(joint_toml(log.spec, True), joint) == joint   # the same text: fine
     with pytest.raises(InputError, match="joint.toml: exists and describes another joint"):
         write_joint_toml(joint_toml(JointSpec(), True), joint)
+
+
+def test_a_control_rate_above_the_sample_rate_is_named(tmp_path):
+    _frame().to_csv(tmp_path / "rec.csv", index=False)
+    path = _joint(tmp_path, "[joint]\ncontrol_rate = 40000.0\n")
+    with pytest.raises(InputError, match=r"joint.toml: joint.control_rate: 40000 Hz exceeds .*rec.csv's sample rate, 20000 Hz"):
+        read_log(tmp_path / "rec.csv", joint=path)

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.fft import next_fast_len
 
+from rippleb.data import MAX_TORQUE_FACTOR
 from rippleb.response import (BAND_FRACTION, BAND_MIN_BINS, BAND_STEP, HALF_POWER,  # noqa: F401 - re-exported
                               STEP_BASELINE_S, STEP_HORIZON_S, STEP_MAX_RISE_S, bandwidth_hz, step_latency_ms)
 
@@ -41,8 +42,10 @@ class Truth:
     The scenario's known events (empty when it has none, or for a recording):
     ``steps`` rows ``(start, rise, change)`` [s, s, Nm] of the step loads' edges,
     ``chirps`` rows ``(start, stop, f0, f1)`` [s, s, Hz, Hz] of the chirp loads.
-    All fields but ``fs`` and the torques are arrays, so a case file stores them as such
-    (:data:`TRUTH_ARRAYS`).
+    ``torque_limit`` [Nm], recorded logs only: the largest torque the joint can carry; a row
+    whose estimate goes beyond it is not scored (:mod:`rippleb.scorable`).
+    All fields but ``fs``, ``torque_limit`` and the torques are arrays, so a case file stores
+    them as such (:data:`TRUTH_ARRAYS`).
     """
 
     fs: float
@@ -54,6 +57,7 @@ class Truth:
     torque_gear: np.ndarray | None = None
     steps: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     chirps: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    torque_limit: float | None = None
 
     def remembered(self, key, compute):
         """``compute()``, computed once per ``key`` while this truth lives.
@@ -93,6 +97,7 @@ class Truth:
         the wave generator). A sample is *moving* when the encoder count changed within
         the last ``REST_HOLD_S`` = 10 ms, inclusive: at the paper's 2500 counts/rev this
         treats motor speeds below 2.4 rpm as rest. The whole log is the evaluation window.
+        ``torque_limit`` is :data:`~rippleb.data.MAX_TORQUE_FACTOR` times the rated torque.
         """
         # imported here: rippleb.dsp compiles the methods' numba kernels at import, which
         # the runner, and with it every CLI command, would otherwise pay for at start-up
@@ -101,7 +106,8 @@ class Truth:
         return cls(fs=log.spec.fs, eval_mask=np.ones(len(log), bool),
                    moving=moving_from_encoder(log.encoder, log.spec.fs),
                    wave_angle=encoder_angle(log.encoder, log.spec.counts_per_rev),
-                   torque_true=log.torque_true, torque_ref=log.torque_ref)
+                   torque_true=log.torque_true, torque_ref=log.torque_ref,
+                   torque_limit=MAX_TORQUE_FACTOR * log.spec.rated_torque)
 
 
 #: The array fields of :class:`Truth` besides the torques: what a case file must store.

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rippleb.data import JointSpec
+from rippleb.data import MAX_TORQUE_FACTOR, JointSpec
 from rippleb.errors import InputError
 from rippleb.mismatch import TABLES as _UNMODELLED_TABLES, parse_tables
 from rippleb.profiles import DEFAULT_RISE, Load, Segment, evaluate_segments  # noqa: F401 (re-exported)
@@ -77,8 +77,8 @@ _JOINT_MAX = {"fs": 1.0e6, "gear_ratio": 1000.0, "counts_per_rev": 2**24}
 #: Lubricant temperatures the friction model is meant for [deg C].
 TEMPERATURE_RANGE = (-40.0, 150.0)
 #: An external load above this many times the rated torque would break the drive
-#: (size-25 momentary peak ratings are 4-7 x rated).
-MAX_LOAD_FACTOR = 10.0
+#: (:data:`rippleb.data.MAX_TORQUE_FACTOR`).
+MAX_LOAD_FACTOR = MAX_TORQUE_FACTOR
 
 def _scenario_dir():
     return importlib.resources.files("rippleb.scenarios")

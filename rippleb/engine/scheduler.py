@@ -23,7 +23,7 @@ from rippleb.metrics import tick_stats
 from rippleb.engine.pool import Pool
 from rippleb.registry import Registry, one_line
 from rippleb.variants import split_label
-from rippleb.engine.results import ENVIRONMENT, STATUSES, ResultsFile, RunWarning, system_info
+from rippleb.engine.results import ENVIRONMENT, MEASURED, STATUSES, ResultsFile, RunWarning, system_info
 from rippleb.engine.rows import SCORED, Case, RowKey
 from rippleb.engine.sealing import SEALED_COLUMN
 
@@ -326,7 +326,7 @@ def _score_row(value: bytes, state: State, case: Case) -> dict:
     estimate, ticks = checked
     fields["n_samples"] = n_samples
     fields.update(job_fns.score_or_invalid(estimate, truth))
-    if fields["status"] == "ok":
+    if fields["status"] in MEASURED:
         fields.update(tick_stats(ticks, n_samples))
     return fields
 

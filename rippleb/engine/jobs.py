@@ -28,7 +28,7 @@ import numpy as np
 
 from rippleb.engine.cache import Artefact, load_log, log_bytes, pack, store
 from rippleb.data import SensorLog
-from rippleb import metrics
+from rippleb import metrics, truthfree
 from rippleb.metrics import Truth
 from rippleb.registry import one_line
 from rippleb.engine.rows import FITTING, SCORED
@@ -195,7 +195,8 @@ def check_estimate(arrays: dict, n_samples: int, n_ticks: int) -> tuple[np.ndarr
 
 
 def score_or_invalid(estimate: np.ndarray, truth: Truth) -> dict:
-    """The accuracy columns of an estimate (:func:`rippleb.metrics.score`), or, when they
+    """The accuracy columns of an estimate (:func:`rippleb.metrics.score`) and its truth-free
+    columns (:func:`rippleb.truthfree.truth_free_scores`), or, when they
     cannot stand as an ``ok`` row, ``{"status": "invalid", "message": why}``.
 
     Every accuracy column must be finite or NaN (NaN: not defined for this log, e.g. no
@@ -204,7 +205,7 @@ def score_or_invalid(estimate: np.ndarray, truth: Truth) -> dict:
     ``rms_error_ref_nm = inf``); the overflow itself is expected here, hence no warning.
     """
     with np.errstate(over="ignore", invalid="ignore"):
-        scores = metrics.score(estimate, truth)
+        scores = {**metrics.score(estimate, truth), **truthfree.truth_free_scores(estimate, truth)}
     needed = {c for c, ref in (("rms_error_nm", truth.torque_true), ("max_error_nm", truth.torque_true),
                                 ("rms_error_ref_nm", truth.torque_ref), ("max_error_ref_nm", truth.torque_ref))
               if ref is not None}

@@ -30,12 +30,14 @@ from rippleb import integrity
 from rippleb.errors import InputError, RunWarning  # noqa: F401 - RunWarning: re-exported
 from rippleb.files import atomic_path
 from rippleb.metrics import METRIC_COLUMNS
+from rippleb.truthfree import TRUTH_FREE_COLUMNS
 
 KEY_COLUMNS = ("method", "scenario", "condition", "seed")
-COLUMNS = (KEY_COLUMNS + ("status",) + METRIC_COLUMNS
+# The truth-free columns came later: a results file without them still reads (as n/a).
+COLUMNS = (KEY_COLUMNS + ("status",) + METRIC_COLUMNS + TRUTH_FREE_COLUMNS
            + ("message", "n_samples", "fit_s", "wall_s", "calibration", "params", "scenario_sha256",
               "rippleb_version", "python", "numpy", "platform", "cpu", "numerics", "run_id"))
-NUMERIC_COLUMNS = METRIC_COLUMNS + ("n_samples", "fit_s", "wall_s")
+NUMERIC_COLUMNS = METRIC_COLUMNS + TRUTH_FREE_COLUMNS + ("n_samples", "fit_s", "wall_s")
 STATUSES = ("ok", "error", "invalid", "timeout")
 #: message prefix of rows that failed for a reason outside the method (``--resume`` retries them)
 ENVIRONMENT = "environment: "

@@ -39,6 +39,9 @@ COLUMNS = (KEY_COLUMNS + ("status",) + METRIC_COLUMNS + TRUTH_FREE_COLUMNS
               "rippleb_version", "python", "numpy", "platform", "cpu", "numerics", "run_id"))
 NUMERIC_COLUMNS = METRIC_COLUMNS + TRUTH_FREE_COLUMNS + ("n_samples", "fit_s", "wall_s")
 STATUSES = ("ok", "error", "invalid", "timeout")
+#: An ``ok`` row holds at least one of these: an error against a reference, or, on a log
+#: with none, a truth-free score.
+SCORE_COLUMNS = ("rms_error_nm", "rms_error_ref_nm") + TRUTH_FREE_COLUMNS
 #: message prefix of rows that failed for a reason outside the method (``--resume`` retries them)
 ENVIRONMENT = "environment: "
 #: The whole of ``results.csv`` is rewritten from memory at most this often [s] ...
@@ -306,6 +309,6 @@ def _check_row(header: list[str], cells: list[str]) -> tuple[dict, str | None]:
                 row[name] = float(row[name]) if row[name] != "" else math.nan
             except ValueError:
                 return row, f"holds {row[name][:20]!r} in the numeric column {name}"
-    if row["status"] == "ok" and not any(math.isfinite(row[c]) for c in ("rms_error_nm", "rms_error_ref_nm")):
-        return row, "is 'ok' without an RMS error"
+    if row["status"] == "ok" and not any(math.isfinite(row.get(c, math.nan)) for c in SCORE_COLUMNS):
+        return row, "is 'ok' without an RMS error or a truth-free score"
     return row, None

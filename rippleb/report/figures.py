@@ -297,9 +297,23 @@ def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
         zoom = plot_restart_zoom(signals["stop-restart"], path("restart_zoom"), seed)
         if zoom is not None:
             figures["restart_zoom"] = (zoom, f"Zoom on a restart of stop-restart (seed {seed})")
-    figures["accuracy_vs_cost"] = (plot_accuracy_vs_cost(ok, path("accuracy_vs_cost")),
-                                   "Accuracy against per-tick cost, from the rows (same-session)")
+    column = _cost_figure_column(ok)
+    if column is not None:  # no row with a score: no empty figure
+        what = "Accuracy" if column == "rms_error_nm" else f"`{column}`"
+        figures["accuracy_vs_cost"] = (plot_accuracy_vs_cost(ok, path("accuracy_vs_cost"), column),
+                                       f"{what} against per-tick cost, from the rows (same-session)")
     return figures, warnings
+
+
+def _cost_figure_column(ok) -> str | None:
+    """What the accuracy-against-cost figure plots: ``rms_error_nm``, or on a recorded log the
+    column it is ranked by (:func:`rippleb.report.recorded.ranking_column`); None if no ok row
+    has a value in it."""
+    from rippleb.report.recorded import ranking_column
+    from rippleb.report.tables import is_recorded
+
+    column = ranking_column(ok) if len(ok) and is_recorded(ok) else "rms_error_nm"
+    return column if column in ok and ok[column].notna().any() else None
 
 
 def _signals_of_seed(methods, scenarios, seed: int) -> tuple[dict, list]:

@@ -1,0 +1,158 @@
+"""The tables of a recorded log (``rippleb run --log``): ranked by what the log can score.
+
+A recording has no ``torque_true`` and often no ``torque_ref``. Its rows are ranked by the
+best score they hold (:func:`ranking_column`): the error against ``torque_true`` if any row
+has one, else against ``torque_ref``, else the truth-free :data:`TRUTH_FREE_RANKING`
+(``rippleb/truthfree.py``); every truth-free column is shown beside it with its own rank.
+One log is one device: no intervals. Every number comes from the rows.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rippleb.report.markdown import first_line, markdown, one_line, plural
+from rippleb.report.stats import method_order, ok_rows, scenario_order
+from rippleb.report.tables import failed_markdown, is_recorded, summary_text, timing_cells
+
+#: The truth-free column a log without any reference is ranked by: the one whose ranking
+#: agreed best with the true ranking on simulated logs of every condition (docs/metrics.md,
+#: "How well the truth-free rankings agree with the truth").
+TRUTH_FREE_RANKING = "ripple_wg_nm"
+
+#: Every column a recorded log's table shows: (header, unit).
+RECORDED_COLUMNS = {
+    "rms_error_nm": ("RMS error against torque_true", "Nm"),
+    "rms_error_ref_nm": ("RMS error against torque_ref", "Nm"),
+    "ripple_wg_nm": ("ripple left at WG orders 2, 4, 8", "Nm"),
+    "rest_std_nm": ("spread at rest", "Nm"),
+    "strain_delay_ms": ("delay behind the strain", "ms"),
+}
+
+#: What the truth-free columns cannot tell; no number here, so nothing in it can go stale.
+TRUTH_FREE_CAVEATS = [
+    "`ripple_wg_nm` is whatever the estimate holds at orders 2, 4 and 8 of the encoder angle while "
+    "the joint turns: a real torque at those orders (a load that repeats with the motor angle) "
+    "counts as ripple, and an estimate that is wrong in any other way (gain, offset, drift, "
+    "noise at other orders) is not seen.",
+    "`rest_std_nm` is the estimate's spread while the encoder stands still: a load that changes at "
+    "rest counts against every method alike, and an estimate that is steady but wrong looks perfect.",
+    "`strain_delay_ms` is the estimate's lag behind the strain in the band where the two are "
+    "coherent: the strain's own lag behind the torque is not in it, and a method that ignores "
+    "the strain (current-based) may lead (negative).",
+]
+
+
+def ranking_column(frame) -> str:
+    """The column the rows of a recorded log are ranked by: ``rms_error_nm`` where any ok row has
+    one, else ``rms_error_ref_nm``, else :data:`TRUTH_FREE_RANKING`."""
+    ok = ok_rows(frame)
+    for column in ("rms_error_nm", "rms_error_ref_nm"):
+        if column in ok and np.isfinite(ok[column].astype(float)).any():
+            return column
+    return TRUTH_FREE_RANKING
+
+
+def shown_columns(frame) -> list[str]:
+    """The columns of :data:`RECORDED_COLUMNS` that some ok row has a value in."""
+    ok = ok_rows(frame)
+    return [c for c in RECORDED_COLUMNS if c in ok and np.isfinite(ok[c].astype(float)).any()]
+
+
+def log_table(rows, column: str):
+    """One log's ok rows sorted by ``column`` (lowest first; methods without a value last),
+    with a rank per shown column (``strain_delay_ms`` by its absolute value: a lead is no
+    better than a lag)."""
+    ok = ok_rows(rows).copy()
+    for c in shown_columns(rows):
+        key = ok[c].astype(float).abs() if c == "strain_delay_ms" else ok[c].astype(float)
+        ok[f"rank:{c}"] = key.rank(method="min")
+    return ok.sort_values([column, "method"], na_position="last").reset_index(drop=True)
+
+
+def _cell(value, rank) -> str:
+    if not np.isfinite(value):
+        return "n/a"
+    return f"{value:.3g}" + (f" ({int(rank)})" if np.isfinite(rank) else "")
+
+
+def log_markdown(rows) -> str:
+    """The table of one log: a line per method, best first by :func:`ranking_column`."""
+    column = ranking_column(rows)
+    table = log_table(rows, column)
+    columns = shown_columns(rows)
+    cost = {r.method: r.p50 for r in timing_cells(rows).itertuples()}
+    lines = []
+    for i, r in enumerate(table.to_dict("records"), start=1):
+        lines.append([str(i), r["method"]] + [_cell(float(r[c]), r[f"rank:{c}"]) for c in columns]
+                     + [f"{cost[r['method']]:.3g}" if np.isfinite(cost.get(r["method"], np.nan)) else "n/a"])
+    heads = ["rank", "method"] + [f"{c} [{RECORDED_COLUMNS[c][1]}] (rank)" for c in columns] + ["p50 [us]"]
+    return markdown(lines, heads)
+
+
+def basis_sentence(column: str) -> str:
+    """Why the table is ranked by ``column``."""
+    if column == "rms_error_nm":
+        return "Ranked by `rms_error_nm`: the log has `torque_true`, so the error itself is known."
+    if column == "rms_error_ref_nm":
+        return ("Ranked by `rms_error_ref_nm`, the error against the log's `torque_ref` (a model torque, "
+                "not the torque itself: what the model leaves out counts as error).")
+    return (f"The log has neither `torque_true` nor `torque_ref`: no error can be computed. Ranked by "
+            f"`{column}`, the truth-free score whose ranking agreed best with the true one on simulated "
+            f"logs (docs/metrics.md); each truth-free column's own rank is in brackets.")
+
+
+def leader_sentence(rows, column: str) -> str:
+    """Who ranks first by ``column``, and what share of ``raw``'s ripple each method removed."""
+    table = log_table(rows, column).dropna(subset=[column])
+    if table.empty:
+        return "No ok row has a value to rank by."
+    first = table.iloc[0]
+    text = f"`{first['method']}` ranks first by `{column}` ({first[column]:.3g} {RECORDED_COLUMNS[column][1]})"
+    raw = table[table["method"] == "raw"]
+    if "ripple_wg_nm" in table and len(raw) and np.isfinite(raw["ripple_wg_nm"].iloc[0]) \
+            and raw["ripple_wg_nm"].iloc[0] > 0:
+        base = float(raw["ripple_wg_nm"].iloc[0])
+        shares = [f"`{r.method}` {1 - r.ripple_wg_nm / base:.0%}" for r in table.itertuples()
+                  if r.method != "raw" and np.isfinite(r.ripple_wg_nm)]
+        text += (f". Of the ripple at WG orders 2, 4, 8 that `raw` (the calibrated strain) holds, "
+                 f"{base:.3g} Nm, each method removed: {', '.join(shares)}")
+    return text + "."
+
+
+def recorded_tables_markdown(frame) -> str:
+    """The README's tables for a recorded log: per log, the ranking table and its basis, what
+    the truth-free columns cannot tell, and the rows that did not finish ok."""
+    parts = []
+    for log in scenario_order(frame["scenario"].unique()):
+        rows = frame[frame["scenario"] == log]
+        column = ranking_column(rows)
+        parts += [f"## `{log}`: methods ranked by `{column}`", "", basis_sentence(column), "",
+                  log_markdown(rows) if len(ok_rows(rows)) else "(no ok rows to rank)", "",
+                  f"- {leader_sentence(rows, column)}", ""]
+    parts += ["### What the truth-free columns cannot tell", ""] + [f"- {c}" for c in TRUTH_FREE_CAVEATS] + [""]
+    parts += ["## Rows that did not finish ok", "", failed_markdown(frame)]
+    return "\n".join(parts)
+
+
+def recorded_summary_text(frame) -> str:
+    """What ``rippleb run --log`` prints when it ends: per log, the ranking table."""
+    parts = []
+    for log in scenario_order(frame["scenario"].unique()):
+        rows = frame[frame["scenario"] == log]
+        column = ranking_column(rows)
+        n_ok = len(ok_rows(rows))
+        parts += [f"{log}: {plural(n_ok, 'ok row')} of {len(rows)}, ranked by {column}", ""]
+        parts += [log_markdown(rows) if n_ok else "(no ok rows to rank)", ""]
+    failed = frame[frame["status"] != "ok"]
+    for r in failed.itertuples():
+        parts.append(f"- {r.method} / {r.scenario}: {r.status}: {one_line(first_line(r.message))}")
+    return "\n".join(parts).rstrip()
+
+
+def run_summary(frame) -> str:
+    """The table ``rippleb run`` ends with: :func:`recorded_summary_text` for a recorded log,
+    :func:`rippleb.report.tables.summary_text` for simulated devices."""
+    if len(frame) and is_recorded(frame):
+        return recorded_summary_text(frame)
+    return summary_text(frame)

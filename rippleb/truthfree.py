@@ -49,30 +49,29 @@ def ripple_wg_nm(estimate: np.ndarray, encoder_angle: np.ndarray, fs: float) -> 
 
     Over each run of motion in one direction, the estimate is re-sampled at
     :data:`POINTS_PER_REV` equally spaced encoder angles per revolution (linear
-    interpolation between the samples where the count changes, as order tracking does),
-    cut into whole revolutions, and per revolution fitted by least squares with
-    ``c0 + c1 u + c2 u^2 + sum_k (a_k cos k phi + b_k sin k phi)`` (``phi`` the angle from the
-    revolution's start, ``u`` its fraction; the quadratic takes the torque's own slow change
-    out of the fit). Returns ``sqrt(mean over revolutions of sum_k (a_k^2 + b_k^2) / 2)``;
-    NaN without one whole revolution in one direction.
+    interpolation between the samples where the count changes, as order tracking does).
+    The torque's own slow change is taken out by subtracting a centred moving average of
+    one revolution (the 2 x P average of classical seasonal decomposition: it passes a
+    straight line unchanged and holds nothing of any whole order). What is left is cut into
+    whole revolutions, and per revolution ``a_k = 2/P sum r cos(k phi)``, ``b_k`` likewise
+    with ``sin`` (``phi`` the angle from the revolution's start; whole orders are orthogonal
+    over a revolution, so orders 1, 3, 6 ... do not leak in). Returns
+    ``sqrt(mean over revolutions of sum_k (a_k^2 + b_k^2) / 2)``; NaN without two whole
+    revolutions in one direction (half a revolution at each end feeds the average).
     """
-    revolutions = [seg for run in _monotonic_runs(encoder_angle, fs)
-                   for seg in _revolutions(estimate, encoder_angle, run)]
+    revolutions = [rev for run in _monotonic_runs(encoder_angle, fs)
+                   for rev in _revolutions(estimate, encoder_angle, run)]
     if not revolutions:
         return float("nan")
-    coef = _harmonic_fit_matrix() @ np.stack(revolutions, axis=1)
-    power = np.sum(coef[3:] ** 2, axis=0) / 2.0   # rows 3.. are a_k, b_k
+    coef = _harmonic_basis() @ np.stack(revolutions, axis=1)
+    power = np.sum(coef ** 2, axis=0) / 2.0
     return float(np.sqrt(np.mean(power)))
 
 
-def _harmonic_fit_matrix() -> np.ndarray:
-    """The least-squares solution operator of :func:`ripple_wg_nm`'s fit on one revolution."""
-    u = np.arange(POINTS_PER_REV) / POINTS_PER_REV
-    phi = 2.0 * np.pi * u
-    columns = [np.ones_like(u), u, u * u]
-    for k in WG_ORDERS:
-        columns += [np.cos(k * phi), np.sin(k * phi)]
-    return np.linalg.pinv(np.stack(columns, axis=1))
+def _harmonic_basis() -> np.ndarray:
+    """Rows ``2/P cos(k phi)`` and ``2/P sin(k phi)`` for each order of :data:`WG_ORDERS`."""
+    phi = 2.0 * np.pi * np.arange(POINTS_PER_REV) / POINTS_PER_REV
+    return np.stack([f(k * phi) for k in WG_ORDERS for f in (np.cos, np.sin)]) * (2.0 / POINTS_PER_REV)
 
 
 def _monotonic_runs(encoder_angle: np.ndarray, fs: float) -> list[np.ndarray]:
@@ -89,16 +88,22 @@ def _monotonic_runs(encoder_angle: np.ndarray, fs: float) -> list[np.ndarray]:
 
 
 def _revolutions(estimate: np.ndarray, encoder_angle: np.ndarray, run: np.ndarray) -> list[np.ndarray]:
-    """The estimate re-sampled on each whole revolution of one run."""
+    """The estimate minus its one-revolution moving average, re-sampled on each whole
+    revolution of one run."""
     angle = encoder_angle[run]
     sign = 1.0 if angle[-1] > angle[0] else -1.0
     travel = sign * (angle - angle[0])               # increasing from 0
-    whole = int(np.floor(travel[-1] / (2.0 * np.pi)))
-    if whole < 1:
+    points = int(np.floor(travel[-1] / (2.0 * np.pi) * POINTS_PER_REV)) + 1
+    if points < 2 * POINTS_PER_REV + 1:
         return []
-    grid = np.arange(whole * POINTS_PER_REV) * (2.0 * np.pi / POINTS_PER_REV)
+    grid = np.arange(points) * (2.0 * np.pi / POINTS_PER_REV)
     values = np.interp(grid, travel, estimate[run])
-    return list(values.reshape(whole, POINTS_PER_REV))
+    average = np.full(POINTS_PER_REV + 1, 1.0 / POINTS_PER_REV)
+    average[[0, -1]] *= 0.5
+    half = POINTS_PER_REV // 2
+    residual = values[half: points - half] - np.convolve(values, average, mode="valid")
+    whole = len(residual) // POINTS_PER_REV
+    return list(residual[: whole * POINTS_PER_REV].reshape(whole, POINTS_PER_REV))
 
 
 def rest_std_nm(estimate: np.ndarray, encoder_angle: np.ndarray, fs: float,

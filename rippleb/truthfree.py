@@ -126,38 +126,58 @@ def rest_std_nm(estimate: np.ndarray, encoder_angle: np.ndarray, fs: float,
     return float(np.sqrt(squares / count)) if count else float("nan")
 
 
-def strain_delay_ms(estimate: np.ndarray, strain: np.ndarray, fs: float) -> float:
+def strain_delay_ms(estimate: np.ndarray, strain: np.ndarray, fs: float, memo: Truth | None = None) -> float:
     """Delay [ms] of the estimate behind the strain, from the phase of their cross-spectrum.
 
     Welch cross- and auto-spectra (Hann segments of :data:`DELAY_SEGMENT_S`, or a quarter
-    of the log if shorter, half overlap) give ``Pxy(f)`` and the coherence ``C(f)``; over the
-    bins ``0 < f <= DELAY_MAX_HZ`` with ``C >= DELAY_MIN_COHERENCE`` (where strain and
-    estimate are one linear relation: the torque's band, not the ripple the estimate removed)
-    the phase ``angle(Pxy) = -2 pi f tau`` is fitted through the origin, weighted by
-    ``abs(Pxy)``: ``tau = -sum w f angle(Pxy) / (2 pi sum w f^2)``. Positive: the estimate lags.
-    Negative where it leads (a current-based estimate sees the motor accelerate first).
-    The bridge's sign is unknown, so the strain is turned over when it correlates negatively
-    with the estimate. NaN with fewer than :data:`DELAY_MIN_BINS` coherent bins.
-    """
-    from scipy import signal
+    of the log if shorter, half overlap, each segment's mean removed: ``scipy.signal.csd``'s
+    defaults) give ``Pxy(f)`` and the coherence ``C(f)``; over the bins
+    ``0 < f <= DELAY_MAX_HZ`` with ``C >= DELAY_MIN_COHERENCE`` (where strain and estimate
+    are one linear relation: the torque's band, not the ripple the estimate removed) the
+    phase ``angle(Pxy) = -2 pi f tau`` is fitted through the origin, weighted by ``abs(Pxy)``:
+    ``tau = -sum w f angle(Pxy) / (2 pi sum w f^2)``. Positive: the estimate lags; negative
+    where it leads (a current-based estimate sees the motor accelerate first). The bridge's
+    sign is unknown, so the strain is turned over when it correlates negatively with the
+    estimate. NaN with fewer than :data:`DELAY_MIN_BINS` coherent bins.
 
+    ``memo``, the :class:`Truth` that holds ``strain``, keeps the strain's spectra for the
+    next estimate of the same log (the same numbers, computed once).
+    """
     x, y = np.asarray(strain, float), np.asarray(estimate, float)
-    if np.dot(x - x.mean(), y - y.mean()) < 0:
-        x = -x
     n = int(min(round(DELAY_SEGMENT_S * fs), len(x) // 4))
     if n < 16 or np.ptp(x) == 0 or np.ptp(y) == 0:
         return float("nan")
-    f, pxy = signal.csd(x, y, fs, nperseg=n)
-    _, pxx = signal.welch(x, fs, nperseg=n)
-    _, pyy = signal.welch(y, fs, nperseg=n)
+    key = ("strain-spectra", id(strain), n, fs)
+    freq, xs, pxx = (memo.remembered(key, lambda: _segment_spectra(x, n, fs)) if memo is not None
+                     else _segment_spectra(x, n, fs))
+    _, ys, pyy = _segment_spectra(y, n, fs)
+    pxy = np.sum(np.conj(xs) * ys, axis=0)
+    if np.dot(x - x.mean(), y - y.mean()) < 0:
+        pxy = -pxy                                   # the strain turned over
     with np.errstate(divide="ignore", invalid="ignore"):
         coherence = np.abs(pxy) ** 2 / (pxx * pyy)
-    use = (f > 0) & (f <= DELAY_MAX_HZ) & (coherence >= DELAY_MIN_COHERENCE)
+    use = (freq > 0) & (coherence >= DELAY_MIN_COHERENCE)
     if use.sum() < DELAY_MIN_BINS:
         return float("nan")
-    weight, freq, phase = np.abs(pxy[use]), f[use], np.angle(pxy[use])
+    weight, freq, phase = np.abs(pxy[use]), freq[use], np.angle(pxy[use])
     tau_ms = -1000.0 * np.sum(weight * freq * phase) / (2.0 * np.pi * np.sum(weight * freq * freq))
     return round(float(tau_ms), 9) + 0.0  # to the ns: a strain copy is 0, not -3e-17 (and not -0)
+
+
+def _segment_spectra(values: np.ndarray, n: int, fs: float):
+    """Frequencies up to :data:`DELAY_MAX_HZ`, the Hann-windowed spectrum of each half-overlapping
+    segment of ``n`` samples (mean removed) there, and their summed power (unscaled: only
+    ratios and phases are used)."""
+    window = np.hanning(n + 1)[:n]                   # periodic Hann, scipy's get_window("hann", n)
+    step = n - n // 2
+    freq = np.fft.rfftfreq(n, 1.0 / fs)
+    keep = freq <= DELAY_MAX_HZ
+    spectra = []
+    for start in range(0, len(values) - n + 1, step):
+        segment = values[start: start + n]
+        spectra.append(np.fft.rfft((segment - segment.mean()) * window)[keep])
+    spectra = np.array(spectra)
+    return freq[keep], spectra, np.sum(np.abs(spectra) ** 2, axis=0)
 
 
 def truth_free_scores(estimate: np.ndarray, truth: Truth) -> dict[str, float]:
@@ -173,7 +193,7 @@ def truth_free_scores(estimate: np.ndarray, truth: Truth) -> dict[str, float]:
     y, angle = np.asarray(estimate, float)[span], truth.encoder_angle[span]
     return {"ripple_wg_nm": ripple_wg_nm(y, angle, truth.fs),
             "rest_std_nm": rest_std_nm(y, angle, truth.fs),
-            "strain_delay_ms": strain_delay_ms(y, truth.strain[span], truth.fs)}
+            "strain_delay_ms": strain_delay_ms(y, truth.strain[span], truth.fs, memo=truth)}
 
 
 TRUTH_FREE_COLUMNS = ("ripple_wg_nm", "rest_std_nm", "strain_delay_ms")

@@ -10,7 +10,8 @@ from scipy import signal
 
 from rippleb.engine.results import read_rows
 from rippleb.metrics import Truth
-from rippleb.truthfree import (MIN_REST_S, POINTS_PER_REV, TRUTH_FREE_COLUMNS, rest_std_nm, ripple_wg_nm,
+from rippleb.truthfree import (MIN_REST_S, POINTS_PER_REV, TRUTH_FREE_COLUMNS, _segment_spectra, rest_std_nm,
+                               ripple_wg_nm,
                                strain_delay_ms, truth_free_scores)
 
 FS = 20_000.0
@@ -157,3 +158,25 @@ def test_an_ok_row_needs_an_error_or_a_truth_free_score(tmp_path, cells, kept):
     else:
         with pytest.warns(Warning, match="without an RMS error or a truth-free score"):
             assert read_rows(path) == []
+
+
+def test_the_strain_side_remembered_for_the_next_estimate_gives_the_same_delay():
+    t, angle, true = _turning()
+    strain = _band_noise(len(t))
+    truth = _truth(len(t), angle, strain)
+    b, a = signal.butter(2, 30 / (FS / 2))
+    for estimate in (signal.lfilter(b, a, strain), -2.0 * strain):   # the second reuses the first's strain side
+        assert strain_delay_ms(estimate, strain, FS, memo=truth) == strain_delay_ms(estimate, strain, FS)
+
+
+def test_the_welch_spectra_are_scipys():
+    x, y = _band_noise(50_000, seed=3), _band_noise(50_000, seed=4) + 0.5 * _band_noise(50_000, seed=3)
+    n = 4000
+    freq, xs, pxx = _segment_spectra(x, n, FS)
+    _, ys, pyy = _segment_spectra(y, n, FS)
+    f, coherence = signal.coherence(x, y, FS, nperseg=n)
+    keep = f <= freq[-1]
+    mine = np.abs(np.sum(np.conj(xs) * ys, axis=0)) ** 2 / (pxx * pyy)
+    np.testing.assert_allclose(mine[1:], coherence[keep][1:], rtol=1e-9)
+    _, pxy = signal.csd(x, y, FS, nperseg=n)
+    np.testing.assert_allclose(np.angle(np.sum(np.conj(xs) * ys, axis=0))[1:], np.angle(pxy[keep])[1:], atol=1e-9)

@@ -124,8 +124,8 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
 def _recorded_body(frame) -> list[str]:
     """A recorded log's ranking (:mod:`rippleb.report.recorded`): per log, its basis, the table
     and who leads; then what the truth-free columns cannot tell."""
-    from rippleb.report.recorded import (TRUTH_FREE_CAVEATS, basis_sentence, leader_sentence, log_markdown,
-                                         ranking_column)
+    from rippleb.report.recorded import (TRUTH_FREE_CAVEATS, UNITS_NOTE, basis_sentence, leader_sentence,
+                                         log_markdown, ranking_column)
     from rippleb.report.stats import ok_rows
 
     body = []
@@ -134,7 +134,8 @@ def _recorded_body(frame) -> list[str]:
         column = ranking_column(rows)
         body += [f"<h2>{_md(f'`{log}`: methods ranked by `{column}`')}</h2>", f"<p>{_md(basis_sentence(column))}</p>"]
         if len(ok_rows(rows)):
-            body += [_markdown_table(log_markdown(rows)), f"<p>{_md(leader_sentence(rows, column))}</p>"]
+            body += [_markdown_table(log_markdown(rows)), f'<p class="note">{_md(UNITS_NOTE)}</p>',
+                     f"<p>{_md(leader_sentence(rows, column))}</p>"]
     return body + ["<h3>What the truth-free columns cannot tell</h3>",
                    "<ul>" + "".join(f"<li>{_md(c)}</li>" for c in TRUTH_FREE_CAVEATS) + "</ul>"]
 

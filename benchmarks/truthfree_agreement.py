@@ -8,7 +8,8 @@ log with a reference is ranked by), and compares each ranking with the true one
 (``rms_error_nm`` against ``torque_true``) by Spearman's rho and Kendall's tau-b
 (``scipy.stats``). Prints per condition the mean of each over the cases where both rankings
 are defined (at least 3 methods with a finite value), as the Markdown table of
-``docs/metrics.md``.
+``docs/metrics.md``; then the same without the methods that do not read the strain, and
+per scenario over every condition.
 
     python benchmarks/truthfree_agreement.py --seeds 2 --jobs 1 --out runs/truthfree
     python benchmarks/truthfree_agreement.py --rows runs/truthfree/results.csv   # table only
@@ -22,11 +23,15 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from rippleb.report.stats import condition_order
+from rippleb.report.stats import condition_order, scenario_order
 from rippleb.truthfree import TRUTH_FREE_COLUMNS
 
 TRUE = "rms_error_nm"
 MEASURES = TRUTH_FREE_COLUMNS + ("rms_error_ref_nm",)
+#: Methods whose estimate does not come from the strain: the truth-free columns see little of
+#: what is wrong with them (a friction or inertia error is not ripple), so the agreement is
+#: also given without them.
+NOT_FROM_STRAIN = ("current-based",)
 #: Fewer ranked methods than this make a rank correlation meaningless.
 MIN_METHODS = 3
 
@@ -45,20 +50,22 @@ def case_agreement(rows: pd.DataFrame, measure: str) -> tuple[float, float]:
     return float(stats.spearmanr(x, y).statistic), float(stats.kendalltau(x, y).statistic)
 
 
-def agreement_table(frame: pd.DataFrame) -> str:
-    """Per condition and measure: mean rho / mean tau over the cases, and how many cases."""
-    lines = ["| condition | " + " | ".join(f"`{m}` rho / tau (cases)" for m in MEASURES) + " |",
+def agreement_table(frame: pd.DataFrame, by: str = "condition") -> str:
+    """Per ``by`` (condition or scenario) and measure: mean rho / mean tau over the cases
+    (condition, scenario, seed), and how many cases."""
+    order = condition_order if by == "condition" else scenario_order
+    lines = [f"| {by} | " + " | ".join(f"`{m}` rho / tau (cases)" for m in MEASURES) + " |",
              "|---|" + "---:|" * len(MEASURES)]
-    for condition in condition_order(frame["condition"].unique()):
-        rows = frame[frame["condition"] == condition]
+    for name in order(frame[by].unique()):
+        rows = frame[frame[by] == name]
         cells = []
         for measure in MEASURES:
             pairs = np.array([case_agreement(case, measure)
-                              for _, case in rows.groupby(["scenario", "seed"])])
+                              for _, case in rows.groupby(["condition", "scenario", "seed"])])
             defined = pairs[np.isfinite(pairs[:, 0])]
             cells.append("n/a (0)" if len(defined) == 0 else
                          f"{defined[:, 0].mean():+.2f} / {defined[:, 1].mean():+.2f} ({len(defined)})")
-        lines.append(f"| {condition} | " + " | ".join(cells) + " |")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -76,6 +83,10 @@ def main() -> None:
     print(f"{len(frame)} rows, {frame['seed'].nunique()} seeds, "
           f"{frame['scenario'].nunique()} scenarios, {frame['method'].nunique()} methods\n")
     print(agreement_table(frame))
+    print(f"\nThe same without {', '.join(NOT_FROM_STRAIN)} (methods that do not read the strain):\n")
+    print(agreement_table(frame[~frame["method"].isin(NOT_FROM_STRAIN)]))
+    print("\nThe same per scenario, over every condition:\n")
+    print(agreement_table(frame, by="scenario"))
 
 
 if __name__ == "__main__":

@@ -36,7 +36,9 @@ TRUTH_FREE_CAVEATS = [
     "counts as ripple, and an estimate that is wrong in any other way (gain, offset, drift, "
     "noise at other orders) is not seen.",
     "`rest_std_nm` is the estimate's spread while the encoder stands still: a load that changes at "
-    "rest counts against every method alike, and an estimate that is steady but wrong looks perfect.",
+    "rest counts against every method alike, and an estimate that is steady but wrong looks perfect; "
+    "a quiet estimate is a smoothed one, and on simulated logs its ranking ran against the true "
+    "error's (docs/metrics.md): read it as a noise figure, not as a ranking.",
     "`strain_delay_ms` is the estimate's lag behind the strain in the band where the two are "
     "coherent: the strain's own lag behind the torque is not in it, and a method that ignores "
     "the strain (current-based) may lead (negative).",

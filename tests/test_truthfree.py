@@ -180,3 +180,24 @@ def test_the_welch_spectra_are_scipys():
     np.testing.assert_allclose(mine[1:], coherence[keep][1:], rtol=1e-9)
     _, pxy = signal.csd(x, y, FS, nperseg=n)
     np.testing.assert_allclose(np.angle(np.sum(np.conj(xs) * ys, axis=0))[1:], np.angle(pxy[keep])[1:], atol=1e-9)
+
+
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(1, 3000), seed=st.integers(0, 2**32 - 1), step=st.sampled_from([0, 1, 3, 400]),
+       gain=st.floats(0.1, 10.0), offset=st.floats(-100.0, 100.0))
+def test_any_log_scores_without_raising_and_scales_with_the_estimate(n, seed, step, gain, offset):
+    """Whatever the encoder does (still, creeping, jumping back and forth), each score is NaN
+    or a number; ripple and rest spread scale with the estimate's gain, the delay not at all."""
+    rng = np.random.default_rng(seed)
+    counts = np.cumsum(rng.integers(-step, step + 1, n)) if step else np.zeros(n)
+    angle = counts * (2 * np.pi / 64)
+    strain = rng.standard_normal(n).cumsum()
+    estimate = strain + rng.standard_normal(n)
+    truth = Truth(fs=2000.0, eval_mask=np.ones(n, bool), moving=np.ones(n, bool), wave_angle=angle,
+                  strain=strain, encoder_angle=angle)
+    base = truth_free_scores(estimate, truth)
+    scaled = truth_free_scores(gain * estimate + offset, truth)
+    for name in ("ripple_wg_nm", "rest_std_nm"):
+        assert np.isnan(base[name]) or base[name] >= 0
+        np.testing.assert_allclose(scaled[name], gain * base[name], rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(scaled["strain_delay_ms"], base["strain_delay_ms"], rtol=1e-6, atol=1e-6)

@@ -48,6 +48,18 @@ def test_a_log_without_reference_is_ranked_by_the_ripple_left_with_each_columns_
     assert "What the truth-free columns cannot tell" in text
 
 
+def test_a_log_without_two_revolutions_is_ranked_by_the_delay_and_without_any_score_not_at_all():
+    frame = _log_frame(strain_delay_ms=[0.5, 7.5, -0.2])
+    assert recorded.ranking_column(frame) == "strain_delay_ms"
+    text = recorded.recorded_tables_markdown(frame)
+    assert "No run of motion in one direction spans two motor revolutions" in text
+    table = [line.split("|") for line in text.splitlines() if line.startswith("| ")][1:]
+    assert [cells[2].strip() for cells in table] == ["order-tracking", "raw", "lowpass"]   # by |delay|
+    unranked = [line.split("|") for line in recorded.log_markdown(_log_frame()).splitlines()
+                if line.startswith("| ")][1:]
+    assert [cells[1].strip() for cells in unranked] == ["-", "-", "-"]
+
+
 def test_a_log_with_a_reference_is_ranked_by_it():
     frame = _log_frame(rms_error_ref_nm=[2.0, 1.0, 3.0], ripple_wg_nm=[1.0, 0.6, 0.2])
     text = recorded.recorded_tables_markdown(frame)
@@ -75,6 +87,7 @@ def test_the_run_summary_of_a_log_ranks_and_of_simulated_devices_is_unchanged():
 def test_no_cost_figure_without_a_score_and_no_legend_warning_without_points(tmp_path):
     assert figures._cost_figure_column(_log_frame()) is None
     assert figures._cost_figure_column(_log_frame(ripple_wg_nm=[1.0, 0.6, 0.2])) == "ripple_wg_nm"
+    assert figures._cost_figure_column(_log_frame(strain_delay_ms=[0.0, 7.5, -1.0])) is None   # no log axis
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         plot_accuracy_vs_cost(_log_frame(), tmp_path / "empty.png", "ripple_wg_nm")

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rippleb.report.error_figures import (error_by_speed, error_by_speed_over_seeds, longest_rest_restart,  # noqa: F401
-                                   plot_accuracy_vs_cost, plot_error_vs_speed, plot_residual_spectra,
+from rippleb.report.error_figures import (COST_FIGURE_LABELS, error_by_speed,  # noqa: F401
+                                   error_by_speed_over_seeds, longest_rest_restart, plot_accuracy_vs_cost, plot_error_vs_speed, plot_residual_spectra,
                                    plot_restart_zoom, residual_spectra, speed_edges)
 from rippleb.report.plotting import (METHOD_STYLE, MOTION_EDGE_LABEL, SIGNAL_SCENARIOS, ScenarioSignals,  # noqa: F401
                               _amplitude, _motion_edges, _pyplot, _save, fit_methods, stream_methods, style)
@@ -313,7 +313,9 @@ def _cost_figure_column(ok) -> str | None:
     from rippleb.report.tables import is_recorded
 
     column = ranking_column(ok) if len(ok) and is_recorded(ok) else "rms_error_nm"
-    return column if column in ok and ok[column].notna().any() else None
+    # only the columns the figure's log axis can show (a delay may be negative or zero)
+    plottable = column in COST_FIGURE_LABELS and column in ok and ok[column].notna().any()
+    return column if plottable else None
 
 
 def _signals_of_seed(methods, scenarios, seed: int) -> tuple[dict, list]:

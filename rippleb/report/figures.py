@@ -17,8 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from rippleb.report.error_figures import (COST_FIGURE_LABELS, error_by_speed,  # noqa: F401
-                                   error_by_speed_over_seeds, longest_rest_restart, plot_accuracy_vs_cost, plot_error_vs_speed, plot_residual_spectra,
-                                   plot_restart_zoom, residual_spectra, speed_edges)
+                                   error_by_speed_over_seeds, longest_rest_restart, plot_accuracy_vs_cost,
+                                   plot_error_vs_speed, plot_residual_spectra, plot_restart_zoom,
+                                   residual_spectra, speed_edges)
 from rippleb.report.plotting import (METHOD_STYLE, MOTION_EDGE_LABEL, SIGNAL_SCENARIOS, ScenarioSignals,  # noqa: F401
                               _amplitude, _motion_edges, _pyplot, _save, fit_methods, stream_methods, style)
 

@@ -123,3 +123,17 @@ def test_a_log_without_truth_is_ranked_end_to_end_through_the_cli(tmp_path):
     assert (tmp_path / "r" / "report" / "figures" / "accuracy_vs_cost.png").stat().st_size > 0
     page = (tmp_path / "r" / "report" / "index.html").read_text()
     assert "methods ranked by <code>ripple_wg_nm</code>" in page and printed[0] in page
+
+
+def test_the_html_page_of_a_log_ranks_it_and_plots_the_ranking_column(tmp_path):
+    from rippleb.report import html_report
+
+    frame = _log_frame(ripple_wg_nm=[1.0, 0.6, 0.2], rest_std_nm=[0.01, 0.001, 0.02])
+    prov = {"run": {"command": "rippleb run --log rec.csv"}, "report": {"command": "rippleb report"},
+            "published": False, "run_dir": "runs/log", "seeds_text": "0 (1 seed)"}
+    page = html_report.write_html(frame, prov, tmp_path / "index.html").read_text()
+    assert "methods ranked by <code>ripple_wg_nm</code>" in page and "Method x condition" not in page
+    assert page.index(">order-tracking<") < page.index(">lowpass<") < page.index(">raw<")
+    cost = html_report._cost_figure(html_report.with_condition(frame), "ripple_wg_nm")
+    assert sorted(float(y) for trace in cost.data for y in trace.y) == [0.2, 0.6, 1.0]
+    assert "ripple left at WG orders" in cost.layout.yaxis.title.text

@@ -44,6 +44,10 @@ class Truth:
     ``chirps`` rows ``(start, stop, f0, f1)`` [s, s, Hz, Hz] of the chirp loads.
     ``torque_limit`` [Nm], recorded logs only: the largest torque the joint can carry; a row
     whose estimate goes beyond it is not scored (:mod:`rippleb.scorable`).
+    What the method itself saw, for the truth-free columns (:mod:`rippleb.truthfree`):
+    ``strain`` [V] and ``encoder_angle`` [rad], the wave-generator angle from the encoder
+    counts (on a simulated log ``wave_angle`` is the true angle, not the encoder's); None
+    on a truth built without them.
     All fields but ``fs``, ``torque_limit`` and the torques are arrays, so a case file stores
     them as such (:data:`TRUTH_ARRAYS`).
     """
@@ -58,6 +62,8 @@ class Truth:
     steps: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     chirps: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     torque_limit: float | None = None
+    strain: np.ndarray | None = None
+    encoder_angle: np.ndarray | None = None
 
     def remembered(self, key, compute):
         """``compute()``, computed once per ``key`` while this truth lives.
@@ -78,11 +84,14 @@ class Truth:
     def from_simulation(cls, sim) -> "Truth":
         """From a simulator ``Simulation`` (its ``log``, ``moving``, ``wave_angle``, ``eval_mask``,
         and the step edges and chirps of its ``scenario``)."""
+        from rippleb.dsp import encoder_angle  # see from_recording
+
         log = sim.log
         truth = cls(fs=log.spec.fs, eval_mask=np.asarray(sim.eval_mask, bool),
                     moving=np.asarray(sim.moving, bool), wave_angle=np.asarray(sim.wave_angle, float),
                     torque_true=log.torque_true, torque_ref=log.torque_ref,
-                    torque_gear=getattr(sim, "torque_gear", None))
+                    torque_gear=getattr(sim, "torque_gear", None), strain=log.strain,
+                    encoder_angle=encoder_angle(log.encoder, log.spec.counts_per_rev))
         sc = getattr(sim, "scenario", None)   # a stand-in simulation may have none: no events
         if sc is None:
             return truth
@@ -103,15 +112,15 @@ class Truth:
         # the runner, and with it every CLI command, would otherwise pay for at start-up
         from rippleb.dsp import encoder_angle
 
+        angle = encoder_angle(log.encoder, log.spec.counts_per_rev)
         return cls(fs=log.spec.fs, eval_mask=np.ones(len(log), bool),
-                   moving=moving_from_encoder(log.encoder, log.spec.fs),
-                   wave_angle=encoder_angle(log.encoder, log.spec.counts_per_rev),
-                   torque_true=log.torque_true, torque_ref=log.torque_ref,
-                   torque_limit=MAX_TORQUE_FACTOR * log.spec.rated_torque)
+                   moving=moving_from_encoder(log.encoder, log.spec.fs), wave_angle=angle,
+                   torque_true=log.torque_true, torque_ref=log.torque_ref, strain=log.strain,
+                   encoder_angle=angle, torque_limit=MAX_TORQUE_FACTOR * log.spec.rated_torque)
 
 
 #: The array fields of :class:`Truth` besides the torques: what a case file must store.
-TRUTH_ARRAYS = ("moving", "wave_angle", "eval_mask", "steps", "chirps")
+TRUTH_ARRAYS = ("moving", "wave_angle", "eval_mask", "steps", "chirps", "strain", "encoder_angle")
 
 
 def moving_from_encoder(encoder: np.ndarray, fs: float, hold_s: float = REST_HOLD_S) -> np.ndarray:

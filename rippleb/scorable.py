@@ -26,8 +26,10 @@ NO_REFERENCE = "no-reference"
 NO_REFERENCE_MESSAGE = ("the log has no reference torque (no torque_ref or torque_true column): its accuracy "
                         "cannot be scored (the error, delay, bandwidth, stopped and restart columns stay "
                         "empty); scored: the method ran on the whole log, its estimate is within the joint's "
-                        "range, and its cost (us_per_tick, samples_per_s) is measured; record a reference "
-                        "torque (a load cell) in a torque_ref column to rank accuracy")
+                        "range, its cost (us_per_tick, samples_per_s) and its truth-free scores (ripple_wg_nm, "
+                        "rest_std_nm, strain_delay_ms; real torque at the wave-generator orders looks like "
+                        "ripple to them) are measured; record a reference torque (a load cell) in a "
+                        "torque_ref column to rank accuracy")
 
 
 def implausible(estimate: np.ndarray, torque_limit: float | None) -> str:

@@ -183,9 +183,9 @@ def _run(args, start: float) -> int:
                            conditions=args.conditions, seed_start=args.seed_start or 0, jobs=args.jobs,
                            out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress,
                            on_start=started, executor=executor(args), sealed=args.sealed)
-    from rippleb.report.tables import summary_text
+    from rippleb.report.recorded import run_summary
 
-    print(summary_text(frame))
+    print(run_summary(frame))
     counts = frame["status"].value_counts().to_dict() if len(frame) else {}
     print(f"\n{len(frame)} rows ({', '.join(f'{v} {k}' for k, v in counts.items()) or 'none'}) "
           f"in {args.out_dir / 'results.csv'}; total wall time {time.perf_counter() - start:.1f} s")

@@ -28,7 +28,7 @@ import numpy as np
 
 from rippleb.engine.cache import Artefact, load_log, log_bytes, pack, store
 from rippleb.data import SensorLog
-from rippleb import metrics
+from rippleb import metrics, truthfree
 from rippleb.metrics import Truth
 from rippleb.registry import one_line
 from rippleb.scorable import NO_REFERENCE, NO_REFERENCE_MESSAGE, implausible
@@ -196,7 +196,8 @@ def check_estimate(arrays: dict, n_samples: int, n_ticks: int) -> tuple[np.ndarr
 
 
 def score_or_invalid(estimate: np.ndarray, truth: Truth) -> dict:
-    """The accuracy columns of an estimate (:func:`rippleb.metrics.score`), or, when they
+    """The accuracy columns of an estimate (:func:`rippleb.metrics.score`) and its truth-free
+    columns (:func:`rippleb.truthfree.truth_free_scores`), or, when they
     cannot stand as an ``ok`` row, ``{"status": "invalid", "message": why}``.
 
     Every accuracy column must be finite or NaN (NaN: not defined for this log, e.g. no
@@ -210,7 +211,7 @@ def score_or_invalid(estimate: np.ndarray, truth: Truth) -> dict:
     if why:
         return {"status": "invalid", "message": why}
     with np.errstate(over="ignore", invalid="ignore"):
-        scores = metrics.score(estimate, truth)
+        scores = {**metrics.score(estimate, truth), **truthfree.truth_free_scores(estimate, truth)}
     needed = {c for c, ref in (("rms_error_nm", truth.torque_true), ("max_error_nm", truth.torque_true),
                                 ("rms_error_ref_nm", truth.torque_ref), ("max_error_ref_nm", truth.torque_ref))
               if ref is not None}

@@ -27,7 +27,7 @@ time-stepped LMS would fold the torque into the weight of the resting angle).
 
 The weights start from the calibration log's least-squares map (``fit``) in the count
 frame of the calibration; a run re-homed on the encoder's index pulse restarts from it
-(:mod:`rippleb.methods._homed`). See ``docs/methods/fourier-lms.md``.
+(:mod:`rippleb.methods._angle_map`). See ``docs/methods/fourier-lms.md``.
 """
 
 from __future__ import annotations
@@ -38,21 +38,12 @@ import numpy as np
 from numba import types
 
 from rippleb.data import JointSpec, SensorLog
-from rippleb.dsp import F8, IN_F8, IN_I8, compiled, fit_gain_offset
-from rippleb.methods._homed import HomedMapMethod
+from rippleb.dsp import F8, IN_F8, IN_I8, compiled
+from rippleb.methods._angle_map import HomedMapMethod, fit_gain_and_ripple
 from rippleb.methods._homing import index_mark
 
 IN_C16 = types.Array(types.complex128, 1, "A", readonly=True)
 I8 = types.int64[:]
-
-
-def harmonic_regressors(counts: np.ndarray, orders: np.ndarray, counts_per_rev: int) -> np.ndarray:
-    """``[cos k theta, sin k theta]`` per order, interleaved, for integer angles in counts."""
-    phase = 2.0 * np.pi * ((np.asarray(counts)[:, None] * orders) % counts_per_rev) / counts_per_rev
-    out = np.empty((len(phase), 2 * len(orders)))
-    out[:, 0::2] = np.cos(phase)
-    out[:, 1::2] = np.sin(phase)
-    return out
 
 
 @compiled(types.void(IN_F8, IN_I8, F8, types.float64, types.float64, IN_I8, IN_C16, types.float64,
@@ -128,18 +119,10 @@ class FourierLMS(HomedMapMethod):
         self.warm_start = warm_start
 
     def fit(self, calibration: SensorLog) -> None:
-        """Gain, offset and the starting weights from the calibration log.
-
-        Gain and offset: least squares of ``torque_ref`` on the strain. Weights: least
-        squares of ``y - torque_ref`` on the reference harmonics at every sample.
-        """
-        if calibration.torque_ref is None:
-            raise ValueError(f"{self.name} needs torque_ref in the calibration log")
+        """Gain, offset and the starting weights from the calibration log: least squares
+        of the strain on ``[torque_ref, 1, x(theta)]`` (:func:`fit_gain_and_ripple`)."""
+        self.gain_, self.offset_, self.map_ = fit_gain_and_ripple(calibration, self.orders, self.name)
         cpr = int(calibration.spec.counts_per_rev)
-        self.gain_, self.offset_ = fit_gain_offset(calibration.strain, calibration.torque_ref)
-        x = harmonic_regressors(calibration.encoder, np.asarray(self.orders), cpr)
-        y = self.gain_ * calibration.strain + self.offset_
-        self.map_, *_ = np.linalg.lstsq(x, y - calibration.torque_ref, rcond=None)
         self.index_mark_ = index_mark(calibration.encoder, calibration.index, cpr)
 
     def reset(self, spec: JointSpec) -> None:

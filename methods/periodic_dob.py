@@ -34,11 +34,13 @@ import numpy as np
 from numba import types
 
 from rippleb.data import JointSpec, SensorLog
-from rippleb.dsp import F8, IN_F8, IN_I8, compiled, fit_gain_offset
-from rippleb.methods._homed import HomedMapMethod
+from rippleb.dsp import F8, IN_F8, IN_I8, compiled
+from rippleb.methods._angle_map import HomedMapMethod, fit_gain_and_ripple
 from rippleb.methods._homing import index_mark
 
 I8 = types.int64[:]
+#: ripple orders fitted beside the gain (``docs/physics.md``); the table itself has no orders
+GAIN_FIT_ORDERS = (1, 2, 4, 6, 8)
 #: positions in ``scalars``: sum of the table, disturbance sum of the open bin, nominal torque
 TABLE_SUM, BIN_SUM, NOMINAL = range(3)
 #: positions in ``counters``: open bin (-1 before the first sample), samples in it
@@ -116,15 +118,14 @@ class PeriodicDOB(HomedMapMethod):
     def fit(self, calibration: SensorLog) -> None:
         """Gain, offset and the starting table from the calibration log.
 
-        Gain and offset: least squares of ``torque_ref`` on the strain. Table: the mean of
-        ``y - torque_ref`` in each angle bin (zero in a bin the log never reached), minus
-        its mean over the turn.
+        Gain and offset: least squares of the strain on ``[torque_ref, 1]`` and a Fourier
+        ripple of the angle at the orders of ``docs/physics.md`` (:func:`fit_gain_and_ripple`),
+        so the ripple does not bias the gain. Table: the mean of ``y - torque_ref`` in each
+        angle bin (zero in a bin the log never reached), minus its mean over the turn.
         """
-        if calibration.torque_ref is None:
-            raise ValueError(f"{self.name} needs torque_ref in the calibration log")
+        self.gain_, self.offset_, _ = fit_gain_and_ripple(calibration, GAIN_FIT_ORDERS, self.name)
         cpr = int(calibration.spec.counts_per_rev)
         bins = self._checked_bins(cpr)
-        self.gain_, self.offset_ = fit_gain_offset(calibration.strain, calibration.torque_ref)
         residual = self.gain_ * calibration.strain + self.offset_ - calibration.torque_ref
         where = bin_of(calibration.encoder.astype(np.int64), bins, cpr)
         sums = np.bincount(where, weights=residual, minlength=bins)

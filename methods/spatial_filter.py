@@ -30,7 +30,8 @@ import numpy as np
 from numba import types
 
 from rippleb.data import JointSpec, SensorBlock, SensorLog
-from rippleb.dsp import F8, IN_F8, IN_I8, compiled, fit_gain_offset
+from rippleb.dsp import F8, IN_F8, IN_I8, compiled
+from rippleb.methods._angle_map import fit_gain_and_ripple
 from rippleb.method import Method
 
 I8 = types.int64[:]
@@ -148,10 +149,10 @@ class SpatialFilter(Method):
         self.speed_window = speed_window
 
     def fit(self, calibration: SensorLog) -> None:
-        """Least-squares gain and offset of the strain against the known torque."""
-        if calibration.torque_ref is None:
-            raise ValueError(f"{self.name} needs torque_ref in the calibration log")
-        self.gain_, self.offset_ = fit_gain_offset(calibration.strain, calibration.torque_ref)
+        """Gain and offset: least squares of the strain on ``[torque_ref, 1]`` and a Fourier
+        ripple of the filter's orders (:func:`fit_gain_and_ripple`), so the ripple does not
+        bias the gain; the ripple coefficients themselves are not used."""
+        self.gain_, self.offset_, _ = fit_gain_and_ripple(calibration, self.orders, self.name)
 
     def reset(self, spec: JointSpec) -> None:
         """Resonators at rest; speed unknown (taken as zero) until the first tick ends."""

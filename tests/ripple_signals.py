@@ -56,3 +56,21 @@ def error_rms(method, calibration, log, skip_s: float = 0.0) -> float:
     estimate, _ = run_method(method, calibration, log)
     k = int(skip_s * SPEC.fs)
     return float(np.sqrt(np.mean((estimate[k:] - log.torque_true[k:]) ** 2)))
+
+
+def with_index(log, index_count: int, count_offset: int = 0):
+    """``log`` with an index pulse where its counts cross ``index_count`` (modulo a turn),
+    then its counts shifted by ``count_offset`` (the joint was power-cycled)."""
+    import dataclasses
+
+    turn = np.floor_divide(log.encoder - index_count, SPEC.counts_per_rev)
+    pulse = np.zeros(len(log.encoder), dtype=np.int8)
+    pulse[1:] = turn[1:] != turn[:-1]
+    return dataclasses.replace(log, index=pulse, encoder=log.encoder + count_offset)
+
+
+def estimate(method, log, size=None) -> np.ndarray:
+    """Reset a fitted ``method`` and stream ``log`` (without its truth) in blocks of ``size``."""
+    method.reset(log.spec)
+    visible = log.for_method(keep_ref=False)
+    return np.concatenate([method.step(b) for b in visible.blocks(size)])

@@ -110,7 +110,7 @@ class FourierLMS(HomedMapMethod):
     #: constructor parameters worth tuning and their ranges (for a tuner shared by all methods)
     tunable = {"mu": (1e-3, 1.0, "log"), "bias_hz": (1.0, 300.0, "log")}
 
-    def __init__(self, orders: tuple = (1, 2, 4, 6, 8), mu: float = 0.05, bias_hz: float = 30.0,
+    def __init__(self, orders: tuple = (1, 2, 4, 6, 8), mu: float = 0.2, bias_hz: float = 10.0,
                  max_step_counts: int = 4, warm_start: bool = True):
         self.orders = orders
         self.mu = mu

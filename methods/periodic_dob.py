@@ -90,8 +90,8 @@ class PeriodicDOB(HomedMapMethod):
     Parameters
     ----------
     bins
-        Angle bins per wave-generator turn (the delay line's length ``N``); 500 bins of 5
-        counts hold order 8 with 62 bins per period (tuned on calibration).
+        Angle bins per wave-generator turn (the delay line's length ``N``); 1250 bins of 2
+        counts hold order 8 with 156 bins per period (tuned on calibration).
     memory_revs
         Forgetting of the periodic filter in passes over a bin: ``lam = exp(-1 /
         memory_revs)``; the comb's teeth are about ``1 / (pi memory_revs)`` orders wide
@@ -108,7 +108,7 @@ class PeriodicDOB(HomedMapMethod):
     tunable = {"bins": (50, 2500, "int"), "memory_revs": (1.0, 300.0, "log"),
                "nominal_hz": (0.5, 100.0, "log")}
 
-    def __init__(self, bins: int = 500, memory_revs: float = 10.0, nominal_hz: float = 10.0,
+    def __init__(self, bins: int = 1250, memory_revs: float = 100.0, nominal_hz: float = 30.0,
                  warm_start: bool = True):
         self.bins = bins
         self.memory_revs = memory_revs

@@ -129,8 +129,8 @@ class SpatialFilter(Method):
         settling in angle is ``q / (pi k)`` revolutions (tuned on calibration).
     fade_speed
         Wave-generator speed [rev/s] below which the subtraction fades linearly to zero.
-        The source fades below 0.1 rad/s of the joint: 1.6 rev/s of the wave generator at
-        the gear ratio 100 of ``JointSpec``; tuned on calibration.
+        The source fades below 0.1 rad/s of the joint, 1.6 rev/s of the wave generator at
+        the gear ratio 100 of ``JointSpec``; tuned on calibration to 4 rev/s.
     speed_window
         Control ticks over which the encoder speed that steps the filters is measured (a
         count difference; 1 ms per tick).
@@ -141,8 +141,8 @@ class SpatialFilter(Method):
     tunable = {"q": (0.5, 20.0, "log"), "fade_speed": (0.1, 5.0, "log"),
                "speed_window": (1, 80, "int")}
 
-    def __init__(self, orders: tuple = (2, 4, 8), q: float = 2.0, fade_speed: float = 1.6,
-                 speed_window: int = 10):
+    def __init__(self, orders: tuple = (2, 4, 8), q: float = 8.0, fade_speed: float = 4.0,
+                 speed_window: int = 2):
         self.orders = orders
         self.q = q
         self.fade_speed = fade_speed

@@ -45,9 +45,10 @@ MECHANISMS = {
                       "that falls near the ripple orders in angle",
     "fourier-lms": "a map of fixed harmonics of the encoder angle, warm-started from calibration and "
                    "adapted by LMS per radian turned: it follows drift and load as fast as its step "
-                   "allows and holds at rest, but runs in the wrong frame until the first index "
-                   "pulse after a power cycle, and cannot follow orders it does not list or "
-                   "components locked to the output",
+                   "allows and holds at rest, but over a short move the torque correlates with the "
+                   "harmonics and leaks into the weights, which then hold it at rest; it runs in the "
+                   "wrong frame until the first index pulse after a power cycle, and cannot follow "
+                   "orders it does not list or components locked to the output",
     "periodic-dob": "a comb over one turn of the encoder angle, any ripple shape, learned on the "
                     "strain minus a low-passed torque: it holds at rest and needs no order list, but "
                     "learns slowly (the load dependence and a changed ripple take many turns), "

@@ -16,7 +16,7 @@ revolution. The torque estimate is the strain with the harmonics removed, ``y - 
 (the bias is torque, not ripple).
 
 Riviere, Rader & Thakor's weighted-frequency variant (WFLC, IEEE Trans. Biomed. Eng.
-45(3), 1998) also adapts the fundamental, because a tremor's frequency is unknown. Here
+45(7), 1998) also adapts the fundamental, because a tremor's frequency is unknown. Here
 the phase is known exactly: the ripple is periodic in the wave-generator (motor) angle,
 which the encoder counts, so ``theta`` is the encoder angle and the combiner needs no
 frequency weight. What is kept of the WFLC is its frequency-weighted step: the update is
@@ -127,6 +127,10 @@ class FourierLMS(HomedMapMethod):
 
     def reset(self, spec: JointSpec) -> None:
         """Weights back to the calibration map (or zero); no previous count."""
+        if not (self.mu >= 0 and self.bias_hz > 0 and int(self.max_step_counts) >= 1):
+            raise ValueError(f"{self.name}: needs mu >= 0, bias_hz > 0 and max_step_counts >= 1, "
+                             f"got mu={self.mu}, bias_hz={self.bias_hz}, "
+                             f"max_step_counts={self.max_step_counts}")
         super().reset(spec)
         cpr = int(spec.counts_per_rev)
         self.orders_ = np.asarray(self.orders, dtype=np.int64)

@@ -142,6 +142,9 @@ class PeriodicDOB(HomedMapMethod):
 
     def reset(self, spec: JointSpec) -> None:
         """The table back to the calibration ripple; no bin open."""
+        if not (self.memory_revs > 0 and self.nominal_hz > 0):
+            raise ValueError(f"{self.name}: needs memory_revs > 0 and nominal_hz > 0, got "
+                             f"memory_revs={self.memory_revs}, nominal_hz={self.nominal_hz}")
         super().reset(spec)
         if len(self.map_) != self._checked_bins(int(spec.counts_per_rev)):
             raise ValueError(f"{self.name}: fitted with {len(self.map_)} bins")

@@ -91,6 +91,13 @@ def test_nothing_is_learned_at_rest(calibration, count, seed, level):
                                atol=1e-9)
 
 
+def test_bad_parameters_name_the_method(calibration):
+    method = FourierLMS(bias_hz=0.0)
+    method.fit(calibration.for_method(keep_ref=True))
+    with pytest.raises(ValueError, match="fourier-lms: needs mu >= 0"):
+        method.reset(SPEC)
+
+
 def test_declares_its_tunable_parameters():
     params = FourierLMS().get_params()
     for name, (low, high, scale) in FourierLMS.tunable.items():

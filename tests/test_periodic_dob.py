@@ -84,6 +84,13 @@ def test_bad_bins_name_the_method_and_the_range(calibration):
         PeriodicDOB(bins=3000).fit(calibration.for_method(keep_ref=True))
 
 
+def test_bad_parameters_name_the_method(calibration):
+    method = PeriodicDOB(memory_revs=0.0)
+    method.fit(calibration.for_method(keep_ref=True))
+    with pytest.raises(ValueError, match="periodic-dob: needs memory_revs > 0"):
+        method.reset(SPEC)
+
+
 def test_declares_its_tunable_parameters():
     params = PeriodicDOB().get_params()
     for name, (low, high, scale) in PeriodicDOB.tunable.items():

@@ -138,7 +138,7 @@ class SpatialFilter(Method):
 
     name = "spatial-filter"
     #: constructor parameters worth tuning and their ranges (for a tuner shared by all methods)
-    tunable = {"q": (0.5, 20.0, "log"), "fade_speed": (0.1, 5.0, "log"),
+    tunable = {"q": (0.5, 50.0, "log"), "fade_speed": (0.1, 20.0, "log"),
                "speed_window": (1, 80, "int")}
 
     def __init__(self, orders: tuple = (2, 4, 8), q: float = 8.0, fade_speed: float = 4.0,

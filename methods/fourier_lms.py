@@ -142,6 +142,8 @@ class FourierLMS(HomedMapMethod):
 
     def _restart_map(self) -> None:
         self.w_ = self.map_.copy() if self.warm_start else np.zeros_like(self.map_)
+        # the count before a re-homing is in the old frame: no motion is read across it
+        self.last_[1] = 0
 
     def _run(self, strain, counts, out) -> None:
         combine(strain, counts, out, self.gain_, self.offset_, self.orders_, self.table_,

@@ -157,6 +157,9 @@ class PeriodicDOB(HomedMapMethod):
     def _restart_map(self) -> None:
         self.table_ = self.map_.copy() if self.warm_start else np.zeros_like(self.map_)
         self.scalars_[TABLE_SUM] = self.table_.sum()
+        # the open bin was gathered in the old frame (before a re-homing): drop it
+        self.scalars_[BIN_SUM] = 0.0
+        self.counters_[:] = (-1, 0)
 
     def _run(self, strain, counts, out) -> None:
         observe(strain, counts, out, self.gain_, self.offset_, int(self.spec_.counts_per_rev),

@@ -135,6 +135,8 @@ class AngleAdaptive(Method):
     """
 
     name = "angle-adaptive"
+    description = ("an angle-indexed ripple map warm-started from calibration, adapted online by RLS"
+                   " (memory_revs=30.0), re-homed on the index pulse")
 
     def __init__(self, orders: tuple = (1, 2, 4, 6, 8), memory_revs: float = 30.0,
                  prior_sd_nm: float = 0.3, floor_sd_nm: float = 1.0, min_counts: int = 2,
@@ -282,6 +284,7 @@ class AngleAdaptiveFrozen(AngleAdaptive):
     """Ablation: the calibration map, re-homed on the index pulse, never adapted."""
 
     name = "angle-adaptive-frozen"
+    description = "angle-adaptive's calibration map, re-homed on the index pulse, never adapted (adapt=false)"
 
     def __init__(self, orders: tuple = (1, 2, 4, 6, 8), memory_revs: float = 30.0,
                  prior_sd_nm: float = 0.3, floor_sd_nm: float = 1.0, min_counts: int = 2,

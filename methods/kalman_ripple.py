@@ -118,6 +118,8 @@ class KalmanRipple(Method):
     """
 
     name = "kalman-ripple"
+    description = ("Kalman filter with the torque and the ripple harmonics at orders 1, 2, 4, 8 in "
+                   "its state (Taghirad & Belanger)")
 
     def __init__(self, orders=(1, 2, 4, 8), load_map=True, torque_rate=False, q_torque=None,
                  q_ripple=None, q_grid=(-4, -3, -2, -1, 0, 1, 2), tick=None):

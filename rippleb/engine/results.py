@@ -30,13 +30,16 @@ from rippleb import integrity
 from rippleb.errors import InputError, RunWarning  # noqa: F401 - RunWarning: re-exported
 from rippleb.files import atomic_path
 from rippleb.metrics import METRIC_COLUMNS
+from rippleb.scorable import NO_REFERENCE
 
 KEY_COLUMNS = ("method", "scenario", "condition", "seed")
 COLUMNS = (KEY_COLUMNS + ("status",) + METRIC_COLUMNS
            + ("message", "n_samples", "fit_s", "wall_s", "calibration", "params", "scenario_sha256",
               "rippleb_version", "python", "numpy", "platform", "cpu", "numerics", "run_id"))
 NUMERIC_COLUMNS = METRIC_COLUMNS + ("n_samples", "fit_s", "wall_s")
-STATUSES = ("ok", "error", "invalid", "timeout")
+STATUSES = ("ok", "error", "invalid", "timeout", NO_REFERENCE)
+#: Statuses of rows whose method ran to the end on a log it may be scored on: their cost is measured.
+MEASURED = ("ok", NO_REFERENCE)
 #: message prefix of rows that failed for a reason outside the method (``--resume`` retries them)
 ENVIRONMENT = "environment: "
 #: The whole of ``results.csv`` is rewritten from memory at most this often [s] ...

@@ -72,7 +72,7 @@ def method_verdicts(frame, column: str = "rms_error_nm", reference: str = "same-
         rows = table[table["method"] == method].set_index("condition")
         best, worst = rows["mean"].idxmin(), rows["mean"].idxmax()
         wins = [c for c in rows.index if rows.loc[c, "rank"] == 1]
-        text = f"`{method}`: " + (f"leads under {', '.join(f'`{c}`' for c in wins)}; " if wins else "")
+        text = f"`{method}`: " + (f"lowest mean under {', '.join(f'`{c}`' for c in wins)}; " if wins else "")
         text += (f"best under `{best}` ({fmt_interval(rows.loc[best, 'mean'], rows.loc[best, 'half'])}, "
                  f"rank {rows.loc[best, 'rank']} of {n_methods[best]}), worst under `{worst}` "
                  f"({fmt_interval(rows.loc[worst, 'mean'], rows.loc[worst, 'half'])}, rank "

@@ -63,7 +63,7 @@ def frame_condition_count(frame) -> int:
 
 
 #: Metrics that no row can hold below zero (``step_latency_ms`` can: an estimate may lead).
-NON_NEGATIVE = tuple(c for c in METRIC_COLUMNS if c != "step_latency_ms")
+NON_NEGATIVE = tuple(c for c in METRIC_COLUMNS if c not in ("step_latency_ms", "gear_erased_fraction"))
 
 
 def _warn_implausible(frame, path) -> None:

@@ -107,6 +107,8 @@ class FourierLMS(HomedMapMethod):
     """
 
     name = "fourier-lms"
+    description = ("a Fourier linear combiner on the encoder angle, warm-started from calibration, "
+                   "adapted by LMS per radian turned (mu=0.2) (Vaz & Thakor; Riviere et al.)")
     #: constructor parameters worth tuning and their ranges (for a tuner shared by all methods)
     tunable = {"mu": (1e-3, 1.0, "log"), "bias_hz": (1.0, 300.0, "log")}
 

@@ -137,6 +137,8 @@ class SpatialFilter(Method):
     """
 
     name = "spatial-filter"
+    description = ("band-passes at orders 2, 4, 8 stepped by the angle increment (q=8.0), subtracted, "
+                   "faded out below fade_speed=4.0 rev/s (Chawda & Niemeyer's matching spatial filter)")
     #: constructor parameters worth tuning and their ranges (for a tuner shared by all methods)
     tunable = {"q": (0.5, 50.0, "log"), "fade_speed": (0.1, 20.0, "log"),
                "speed_window": (1, 80, "int")}

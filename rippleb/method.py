@@ -33,7 +33,9 @@ class Method:
     override :meth:`fit` to identify parameters from the calibration log and
     :meth:`reset` to clear streaming state. Constructor parameters are plain keyword
     arguments stored as attributes (scikit-learn's rule): derive anything else in
-    ``fit`` or ``reset``.
+    ``fit`` or ``reset``. A subclass may declare ``tunable = {"param": (low, high,
+    "log" | "linear" | "int"), ...}``, the constructor parameters worth tuning on the
+    calibration scenario and their ranges (``{}``: none); see docs/design.md.
     """
 
     name: str = ""

@@ -18,7 +18,8 @@ METHOD_STYLE = {
     "raw": ("tab:blue", "-"), "lowpass": ("tab:cyan", "-"), "current-based": ("m", "--"),
     "order-tracking": ("tab:red", "-"), "order-tracking-no-deadzone": ("tab:orange", "-."),
     "order-tracking-no-backprop": ("tab:brown", ":"), "switched-notch": ("tab:green", "-"),
-    "kalman-ripple": ("tab:purple", "-"),
+    "kalman-ripple": ("tab:purple", "-"), "spatial-filter": ("tab:blue", "--"),
+    "fourier-lms": ("tab:pink", "-"), "periodic-dob": ("tab:purple", "--"),
 }
 #: Scenarios whose signals the figures need: Table I/Fig. 5/6, speed coverage, restarts.
 SIGNAL_SCENARIOS = ("paper-quintic", "speed-sweep", "stop-restart")

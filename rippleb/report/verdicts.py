@@ -39,6 +39,21 @@ MECHANISMS = {
                       "dynamics, a saturating load law, a flank change) is what it cannot learn",
     "angle-adaptive-frozen": "the calibration's map, never adapted: exact while the joint stays as "
                              "calibrated, wrong by whatever changed since (aging, re-assembly)",
+    "spatial-filter": "band-passes at orders 2, 4, 8 stepped in angle: they need no map, so drift, "
+                      "re-assembly and power cycles pass them by, but they fade out at rest and at "
+                      "low speed (the ripple stays there) and take the part of every torque change "
+                      "that falls near the ripple orders in angle",
+    "fourier-lms": "a map of fixed harmonics of the encoder angle, warm-started from calibration and "
+                   "adapted by LMS per radian turned: it follows drift and load as fast as its step "
+                   "allows and holds at rest, but over a short move the torque correlates with the "
+                   "harmonics and leaks into the weights, which then hold it at rest; it runs in the "
+                   "wrong frame until the first index pulse after a power cycle, and cannot follow "
+                   "orders it does not list or components locked to the output",
+    "periodic-dob": "a comb over one turn of the encoder angle, any ripple shape, learned on the "
+                    "strain minus a low-passed torque: it holds at rest and needs no order list, but "
+                    "learns slowly (the load dependence and a changed ripple take many turns), "
+                    "is resolved to its angle bins and runs in the wrong frame until the first "
+                    "index pulse after a power cycle",
 }
 
 

@@ -39,6 +39,11 @@ MECHANISMS = {
                       "dynamics, a saturating load law, a flank change) is what it cannot learn",
     "angle-adaptive-frozen": "the calibration's map, never adapted: exact while the joint stays as "
                              "calibrated, wrong by whatever changed since (aging, re-assembly)",
+    "gear-aware": "angle-adaptive-frozen's map fitted beside an inertial model of the gear's "
+                  "transmission-error torque, which it keeps: it removes what the calibration's "
+                  "ripple map holds and no more, so it is wrong by whatever changed since "
+                  "calibration, and a gear torque the inertial model misses (a resonance) is "
+                  "taken for ripple",
     "spatial-filter": "band-passes at orders 2, 4, 8 stepped in angle: they need no map, so drift, "
                       "re-assembly and power cycles pass them by, but they fade out at rest and at "
                       "low speed (the ripple stays there) and take the part of every torque change "

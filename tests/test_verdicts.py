@@ -46,3 +46,12 @@ def test_the_worst_case_column_names_its_condition():
     assert row.rstrip(" |").endswith("(realistic)")
     one = condition_summary_markdown(FRAME[FRAME["condition"] == "same-session"])
     assert "worst case" not in one  # one condition: nothing to take the worst of
+
+
+def test_a_run_of_one_condition_says_where_each_method_ranks_and_why():
+    one = FRAME[FRAME["condition"] == "same-session"]
+    lines = {line.split("`")[1]: line for line in method_verdicts(one)}
+    assert lines["angle-adaptive"].startswith("`angle-adaptive`: lowest mean under `same-session`; rank 1 of 3 "
+                                              "under `same-session`")
+    assert "rank 3 of 3 under `same-session`" in lines["raw"] and "worst under" not in lines["raw"]
+    assert lines["raw"].endswith(f"Why: {MECHANISMS['raw']}.")

@@ -78,10 +78,14 @@ def method_verdicts(frame, column: str = "rms_error_nm", reference: str = "same-
         best, worst = rows["mean"].idxmin(), rows["mean"].idxmax()
         wins = [c for c in rows.index if rows.loc[c, "rank"] == 1]
         text = f"`{method}`: " + (f"lowest mean under {', '.join(f'`{c}`' for c in wins)}; " if wins else "")
-        text += (f"best under `{best}` ({fmt_interval(rows.loc[best, 'mean'], rows.loc[best, 'half'])}, "
-                 f"rank {rows.loc[best, 'rank']} of {n_methods[best]}), worst under `{worst}` "
-                 f"({fmt_interval(rows.loc[worst, 'mean'], rows.loc[worst, 'half'])}, rank "
-                 f"{rows.loc[worst, 'rank']} of {n_methods[worst]})")
+        if len(rows) == 1:   # one condition: where it ranks there
+            text += (f"rank {rows.loc[best, 'rank']} of {n_methods[best]} under `{best}` "
+                     f"({fmt_interval(rows.loc[best, 'mean'], rows.loc[best, 'half'])})")
+        else:
+            text += (f"best under `{best}` ({fmt_interval(rows.loc[best, 'mean'], rows.loc[best, 'half'])}, "
+                     f"rank {rows.loc[best, 'rank']} of {n_methods[best]}), worst under `{worst}` "
+                     f"({fmt_interval(rows.loc[worst, 'mean'], rows.loc[worst, 'half'])}, rank "
+                     f"{rows.loc[worst, 'rank']} of {n_methods[worst]})")
         if reference in rows.index and mismatch in rows.index:
             ref, mis = rows.loc[reference, "mean"], rows.loc[mismatch, "mean"]
             text += (f"; the physics no method models (`{mismatch}` against `{reference}`) "

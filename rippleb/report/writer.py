@@ -102,8 +102,9 @@ def tables_markdown(frame) -> str:
              "that condition; then mean ± 95 % t-interval over seeds.", "",
              condition_summary_markdown(frame), ""]
     parts += [f"- {s}" for s in condition_headline(frame)] + [""]
+    parts += _gear_section(frame)
     verdicts = method_verdicts(frame)
-    if verdicts and frame_condition_count(frame) > 1:
+    if verdicts:
         parts += ["### Each method in plain words", "",
                   "Where it wins and where it breaks, from the table above; why, from what the "
                   "method assumes of the ripple (its page under docs/methods/).", ""]
@@ -112,6 +113,25 @@ def tables_markdown(frame) -> str:
         parts += _condition_section(condition, rows, source)
     parts += ["## Rows that did not finish ok", "", failed_markdown(frame)]
     return "\n".join(parts)
+
+
+def _gear_section(frame) -> list[str]:
+    """What each method did with the gear's real torque (docs/metrics.md, "What a method
+    erased"): the share it erased and its error against the joint without it, per condition."""
+    if "gear_erased_fraction" not in frame or not frame["gear_erased_fraction"].notna().any():
+        return []
+    return ["## What each method did with the gear's real torque", "",
+            "Every harmonic drive's transmission error puts real torque at the ripple's own orders "
+            "(docs/physics.md, \"Transmission error\"). `gear_erased_fraction`: the share of it a "
+            "method removed (0 kept, 1 erased; ripple left at orders 1 and 2 moves it on single "
+            "devices, so read the means). A torque controller needs the real torque and ranks by "
+            "`rms_error_nm` above; an application that wants the gear's torque gone ranks by "
+            "`rms_error_without_gear_nm`.", "",
+            "### `gear_erased_fraction` (mean over the scenarios, 95 % interval)", "",
+            condition_summary_markdown(frame, "gear_erased_fraction"), "",
+            "### `rms_error_without_gear_nm` (mean over the scenarios, 95 % interval)", "",
+            condition_summary_markdown(frame, "rms_error_without_gear_nm"), ""] + \
+        [f"- {s}" for s in condition_headline(frame, "rms_error_without_gear_nm")] + [""]
 
 
 def _condition_section(condition: str, rows, source: str) -> list[str]:

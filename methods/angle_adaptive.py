@@ -137,6 +137,9 @@ class AngleAdaptive(Method):
     name = "angle-adaptive"
     description = ("an angle-indexed ripple map warm-started from calibration, adapted online by RLS"
                    " (memory_revs=30.0), re-homed on the index pulse")
+    #: ranges of the tuning protocol (rippleb/tuning.py)
+    tunable = {"memory_revs": (3.0, 300.0, "log"), "prior_sd_nm": (0.03, 3.0, "log"),
+               "min_counts": (1, 5, "int")}
 
     def __init__(self, orders: tuple = (1, 2, 4, 6, 8), memory_revs: float = 30.0,
                  prior_sd_nm: float = 0.3, floor_sd_nm: float = 1.0, min_counts: int = 2,
@@ -285,6 +288,8 @@ class AngleAdaptiveFrozen(AngleAdaptive):
 
     name = "angle-adaptive-frozen"
     description = "angle-adaptive's calibration map, re-homed on the index pulse, never adapted (adapt=false)"
+    #: nothing adapts, so nothing of the online law to tune
+    tunable = {}
 
     def __init__(self, orders: tuple = (1, 2, 4, 6, 8), memory_revs: float = 30.0,
                  prior_sd_nm: float = 0.3, floor_sd_nm: float = 1.0, min_counts: int = 2,

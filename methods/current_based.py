@@ -197,6 +197,9 @@ class CurrentBased(Method):
     name = "current-based"
     description = ("motor current minus identified friction and inertia, then a low-pass "
                    "(cutoff=130.0), as in the paper's comparison")
+    #: ranges of the tuning protocol (rippleb/tuning.py); ``cutoff`` is the paper's 130 Hz
+    tunable = {"velocity_cutoff": (50.0, 800.0, "log"), "accel_cutoff": (5.0, 100.0, "log"),
+               "sign_width": (0.1, 2.0, "log")}
 
     def __init__(self, cutoff=130.0, velocity_cutoff=200.0, accel_cutoff=25.0, sign_width=0.5,
                  load_dependent=True):

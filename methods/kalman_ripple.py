@@ -120,6 +120,9 @@ class KalmanRipple(Method):
     name = "kalman-ripple"
     description = ("Kalman filter with the torque and the ripple harmonics at orders 1, 2, 4, 8 in "
                    "its state (Taghirad & Belanger)")
+    #: nothing for the protocol to tune: its noise levels are chosen on the calibration log
+    #: by its own likelihood search (q_grid), part of its fit
+    tunable = {}
 
     def __init__(self, orders=(1, 2, 4, 8), load_map=True, torque_rate=False, q_torque=None,
                  q_ripple=None, q_grid=(-4, -3, -2, -1, 0, 1, 2), tick=None):

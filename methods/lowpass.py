@@ -42,6 +42,8 @@ class Lowpass(Method):
 
     name = "lowpass"
     description = "the raw estimate through a Butterworth low-pass (order=2, cutoff_hz=30.0)"
+    #: ranges of the tuning protocol (rippleb/tuning.py)
+    tunable = {"cutoff_hz": (2.0, 200.0, "log")}
 
     def __init__(self, cutoff_hz: float = 30.0, order: int = 2):
         self.cutoff_hz = cutoff_hz

@@ -236,6 +236,8 @@ class OrderTracking(Method):
     name = "order-tracking"
     description = ("the paper: strain re-sampled at encoder positions, notches at orders 2, 4, 8 "
                    "(q=30.0), dead zone, back propagation")
+    #: ranges of the tuning protocol (rippleb/tuning.py)
+    tunable = {"q": (5.0, 50.0, "log"), "stop_after_s": (0.0005, 0.005, "log")}
 
     def __init__(self, q: float = 30.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.0015,
                  dead_zone: bool = True, back_propagation: bool = True):

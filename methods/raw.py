@@ -18,6 +18,8 @@ class Raw(Method):
 
     name = "raw"
     description = "strain times a gain plus an offset, both fitted by least squares on the calibration log"
+    #: nothing to tune: the gain and offset are fitted on the calibration log
+    tunable = {}
 
     def fit(self, calibration):
         self.gain_, self.offset_ = fit_gain_offset(calibration.strain, calibration.torque_ref)

@@ -297,6 +297,8 @@ class SwitchedNotch(Method):
 
     name = "switched-notch"
     description = "time-domain notches at orders 2, 4, 8 (q=8.0), switched by encoder speed (Godler et al.)"
+    #: ranges of the tuning protocol (rippleb/tuning.py)
+    tunable = {"min_speed": (0.5, 5.0, "log"), "q": (2.0, 32.0, "log"), "speed_window": (20, 320, "int")}
 
     def __init__(self, orders=(2, 4, 8), n_bands=None, min_speed=2.0, max_speed=50.0, q=8.0,
                  hysteresis=0.3, speed_window=80):

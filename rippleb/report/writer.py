@@ -218,12 +218,20 @@ READING_SIMULATED = """## Reading these tables
   changed since calibration: a power cycle loses the absolute angle until the first index
   pulse, ageing drifts the map, re-assembly redraws it (`docs/physics.md`, "Deployment
   conditions").
+- Under every condition, calibration included, the gear has its transmission error: a
+  position error of the wave-generator angle (twice per turn dominant) that puts **real**
+  torque at orders 1 and 2, the ripple's own, through the joint's dynamics
+  (`docs/physics.md`, "Transmission error"). `torque_ref` does not know it. A method that
+  removes everything at those orders removes it too and is charged for it in
+  `rms_error_nm`; `gear_erased_fraction` and `rms_error_without_gear_nm` say what each
+  method did with it.
 - `realistic` is the same joint as `same-session` with the physics no method models turned on
   at their documented sizes, in the calibration session too: gauge dynamics that change the
-  ripple with speed, a ripple that saturates with load and changes with the loaded tooth
-  flank, gauge warm-up within the session, an anti-alias filter and PWM pickup before the
-  ADC, encoder edge errors, eccentricity and missed counts (`docs/physics.md`, "Beyond the
-  methods' models"). It is where a method that wins only because the simulator's ripple has
+  ripple with speed, a ripple that saturates with load, changes with the loaded tooth flank
+  and follows the load's history, ripple at orders no method models (3 and the wave
+  generator bearing's 9.24), gauge warm-up within the session, an anti-alias filter and PWM
+  pickup before the ADC, encoder edge errors, eccentricity and missed counts
+  (`docs/physics.md`, "Beyond the methods' models"); its position loop is today's. It is where a method that wins only because the simulator's ripple has
   the form it assumes would be found out; `results/sweeps/` varies each effect alone.
 - `torque_ref` (Table I's reference) is the paper's eq. (7) on the desired trajectory with
   a nominal arm model whose masses and inertias differ from the simulated arm's by a few

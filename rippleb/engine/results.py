@@ -30,6 +30,7 @@ from rippleb import integrity
 from rippleb.errors import InputError, RunWarning  # noqa: F401 - RunWarning: re-exported
 from rippleb.files import atomic_path
 from rippleb.metrics import METRIC_COLUMNS
+from rippleb.printable import escaped
 
 KEY_COLUMNS = ("method", "scenario", "condition", "seed")
 COLUMNS = (KEY_COLUMNS + ("status",) + METRIC_COLUMNS
@@ -140,7 +141,11 @@ class ResultsFile:
 
     def add(self, row: dict) -> None:
         """Keep one finished row and put it on disk: appended, or with the whole file
-        rewritten (the first row, a new column, or the rewrite interval passed)."""
+        rewritten (the first row, a new column, or the rewrite interval passed). A
+        message is kept with its control characters escaped (:mod:`rippleb.printable`):
+        a method's text never reaches a terminal or a README able to act."""
+        if row.get("message") is not None:
+            row = {**row, "message": escaped(row["message"])}
         self.rows.append(row)
         if any(name not in self._header for name in row):
             self._format_all()   # a new column: every line gets a cell for it

@@ -209,7 +209,9 @@ class Ledger:
     def append(self, row: dict) -> None:
         if self.active:
             new = not self.path.is_file()
-            with open(self.path, "a", encoding="ascii") as fh:
+            from rippleb.files import open_appending
+
+            with open_appending(self.path, encoding="ascii") as fh:
                 fh.write((_LEDGER_HEADER.format(key=key_id(self._secret)) if new else "") + self.mac(row) + "\n")
 
     def rewrite(self, rows: list[dict]) -> None:

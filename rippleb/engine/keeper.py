@@ -3,8 +3,9 @@
 :class:`rippleb.engine.pool.Pool` (or the fork server, :mod:`rippleb.engine.forkserver`) forks a keeper
 per job; the keeper takes a new session and PID namespace, becomes a child subreaper and
 forks the worker, which runs the job with a memory limit, with every inherited file
-descriptor closed but its result pipe, and with its output going to a file
-(:mod:`rippleb.engine.isolation` says why each step). The keeper reports the worker's PID and,
+descriptor closed but its result pipe, and with its output going through a pipe into a
+log the keeper opened and bounds (:mod:`rippleb.engine.joblog`; :mod:`rippleb.engine.isolation`
+says why each step). The keeper reports the worker's PID and,
 when it has ended and everything it started is gone, its exit code, on the control pipe.
 
 The keeper never waits blindly: it watches its end of the control pipe while it waits for
@@ -27,6 +28,7 @@ import traceback
 
 from rippleb import integrity
 from rippleb.engine import isolation
+from rippleb.engine.joblog import JobLog
 from rippleb.registry import one_line
 
 
@@ -45,6 +47,8 @@ def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output, confine=None) -> N
         os.setsid()
         isolation.close_fds_except(result_w, ctrl_w)
         isolation.not_dumpable()   # its descriptors (the control pipe) out of the worker's reach
+        log = JobLog(output)
+        log.open()   # before the worker can change what the run directory's paths lead to
         isolated, own_mounts = isolation.new_namespaces()
         isolation.become_subreaper()
         worker = os.fork()
@@ -54,41 +58,51 @@ def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output, confine=None) -> N
             # must not reach the keeper, whose death would lose the row it reports.
             os.setpgid(0, 0)
             os.close(ctrl_w)
-            _worker(fn, result_w, memory_mb, output, confine if isolated and own_mounts else None,
+            log.give_to_worker()
+            _worker(fn, result_w, memory_mb, confine if isolated and own_mounts else None,
                     confine is not None)  # never returns
         os.close(result_w)
+        os.close(log.write_fd)
         _write_all(ctrl_w, f"{worker} {int(isolated)}\n".encode())
-        status = _wait_worker(worker, ctrl_w)
+        status = _wait_worker(worker, ctrl_w, log)
         if isolated:  # the kernel ended the namespace with its first process: nothing left to hunt
             isolation.reap_exited()
         else:
             isolation.end_descendants()
+        log.close()   # the log is whole before the runner hears the job ended
         _write_all(ctrl_w, f"{os.waitstatus_to_exitcode(status)}\n".encode())
     finally:
         os._exit(0)
 
 
-def _wait_worker(worker: int, ctrl_w: int) -> int:
-    """Wait for ``worker`` to end and return its wait status; end it at once if the runner
-    closes its end of the control pipe (``POLLERR`` on ours), i.e. no one will read what
-    the worker sends, nor wait for it.
+def _wait_worker(worker: int, ctrl_w: int, log: JobLog) -> int:
+    """Wait for ``worker`` to end and return its wait status, copying its output into
+    ``log`` meanwhile; end it at once if the runner closes its end of the control pipe
+    (``POLLERR`` on ours), i.e. no one will read what the worker sends, nor wait for it.
 
-    Where the kernel has no process file descriptors (``pidfd_open``, Linux 5.3) this is a
-    plain ``waitpid``: the runner and the fork server still end the keeper themselves.
+    Where the kernel has no process file descriptors (``pidfd_open``, Linux 5.3) the
+    output is copied until the worker closes it, then the worker is waited for plainly:
+    the runner and the fork server still end the keeper themselves.
     """
     try:
         pidfd = os.pidfd_open(worker)
     except (AttributeError, OSError):
+        while log.drain():
+            select.select([log.read_fd], [], [])
         return os.waitpid(worker, 0)[1]
     watch = select.poll()
     watch.register(pidfd, select.POLLIN)
     watch.register(ctrl_w, 0)  # only errors: POLLERR once the reading end is closed
+    watch.register(log.read_fd, select.POLLIN)
     try:
         while True:
             pid, status = os.waitpid(worker, os.WNOHANG)
             if pid:
                 return status
-            if any(fd == ctrl_w for fd, _ in watch.poll()):
+            ready = {fd for fd, _ in watch.poll()}
+            if log.read_fd in ready and not log.drain():
+                watch.unregister(log.read_fd)   # every writer closed it: no more to copy
+            if ctrl_w in ready:
                 watch.unregister(ctrl_w)
                 with contextlib.suppress(ProcessLookupError):
                     os.kill(worker, signal.SIGKILL)
@@ -96,13 +110,13 @@ def _wait_worker(worker: int, ctrl_w: int) -> int:
         os.close(pidfd)
 
 
-def _worker(fn, result_w: int, memory_mb, output, confine, untrusted: bool) -> None:
+def _worker(fn, result_w: int, memory_mb, confine, untrusted: bool) -> None:
     message = b"R" + b"worker did not start"
     try:
         _keep_inherited_pages_shared()
         isolation.die_with_parent()
         isolation.close_fds_except(result_w)
-        _redirect_output(output)
+        _rebind_output()
         if untrusted:
             _confine(confine)
         _limit_memory(memory_mb)
@@ -157,14 +171,8 @@ def _write_all(fd: int, data: bytes) -> None:
         view = view[n:]
 
 
-def _redirect_output(path: str | None) -> None:
-    null = os.open(os.devnull, os.O_RDONLY)
-    os.dup2(null, 0)
-    os.close(null)
-    fd = os.open(path or os.devnull, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-    os.dup2(fd, 1)
-    os.dup2(fd, 2)
-    os.close(fd)
+def _rebind_output() -> None:
+    """Point Python's stdout and stderr at fds 1 and 2 (the job's output pipe, :mod:`rippleb.engine.joblog`)."""
     # sys.stdout/stderr may be wrappers that bypass fds 1 and 2 (pytest, IDEs): rebind them.
     sys.stdout = open(1, "w", buffering=1, closefd=False)
     sys.stderr = open(2, "w", buffering=1, closefd=False)

@@ -28,7 +28,7 @@ import numpy as np
 from rippleb.simulator.conditions import DEFAULT_CONDITION
 from rippleb import integrity
 from rippleb.errors import InputError, RunWarning  # noqa: F401 - RunWarning: re-exported
-from rippleb.files import atomic_path
+from rippleb.files import atomic_path, open_appending
 from rippleb.metrics import METRIC_COLUMNS
 from rippleb.printable import escaped
 
@@ -161,7 +161,7 @@ class ResultsFile:
         if self.path is None or time.monotonic() - self._written_at >= due or not self.path.is_file():
             self.flush()
         else:
-            with open(self.path, "a", encoding="utf-8") as fh:
+            with open_appending(self.path) as fh:
                 fh.write(line)
 
     def flush(self) -> None:

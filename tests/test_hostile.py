@@ -1,0 +1,228 @@
+"""The project's own hostile suite (issue 34): a method, or whoever edits a run directory
+between runs, tries each attack of the issue; every test asserts the attack failed and
+that the honest rows beside it are untouched.
+
+Attacks on the run directory and on the terminal (items 3 and 4) run through the real CLI
+on one finished run of three methods: ``chatty`` prints 30 MB, ``escaper`` raises an
+exception whose text holds terminal escape sequences, ``raw`` is the honest neighbour.
+"""
+
+import csv
+import io
+import json
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+
+import pandas as pd
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from rippleb.engine.joblog import OUTPUT_CAP_BYTES, JobLog
+from rippleb.printable import escaped
+from test_bad_input import _dist  # a minimal installed distribution without pip
+
+#: A terminal escape that retitles the window, clears the screen and rings the bell.
+ESCAPE = "\x1b]0;owned\x07\x1b[2J\x1b[31mred\r\x9b"
+HOSTILE = textwrap.dedent(f'''
+    import os, sys
+    import numpy as np
+    from rippleb import Method
+
+    class Chatty(Method):
+        """Prints 30 MB to stdout and stderr, then scores like a zero estimate."""
+        name = "chatty"
+        def reset(self, spec):
+            line = "x" * 1023 + "\\n"
+            for _ in range(15 * 1024):
+                sys.stdout.write(line)
+                sys.stderr.write(line)
+        def step(self, block):
+            return np.zeros(len(block))
+
+    class Escaper(Method):
+        """Raises an exception whose text would act on a terminal."""
+        name = "escaper"
+        def reset(self, spec):
+            raise RuntimeError({ESCAPE!r})
+        def step(self, block):
+            return np.zeros(len(block))
+''')
+ROW_LOG = "{}--static-contact--same-session--0.txt"
+
+
+def _cli(where, site, *args):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]),
+           "RIPPLEB_KEY_FILE": str(where / "key")}
+    return subprocess.run([sys.executable, "-m", "rippleb", *map(str, args)], capture_output=True, text=True,
+                          env=env, cwd=where, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    """``(directory, site, first run)``: one finished run of chatty, escaper and raw."""
+    where = tmp_path_factory.mktemp("hostile")
+    site = where / "site"
+    _dist(site, "rippleb-hostile", "rippleb_hostile", HOSTILE, {"chatty": "Chatty", "escaper": "Escaper"})
+    proc = _cli(where, site, "run", "--methods", "chatty,escaper,raw", "--scenarios", "static-contact",
+                "--seeds", "1", "--jobs", "2", "--no-progress", "--out", "run")
+    assert proc.returncode == 0, proc.stderr
+    return where, site, proc
+
+
+def _copy(finished, tmp_path):
+    where, site, _ = finished
+    shutil.copytree(where / "run", tmp_path / "run")
+    shutil.copy(where / "key", tmp_path / "key")
+    return tmp_path / "run", site
+
+
+def _rows(run):
+    return {row["method"]: row for row in csv.DictReader(io.StringIO((run / "results.csv").read_text()))}
+
+
+@pytest.mark.slow
+def test_a_method_s_output_is_cut_at_the_cap_with_a_note(finished):
+    where, _, _ = finished
+    log = (where / "run" / "logs" / ROW_LOG.format("chatty")).read_bytes()
+    assert OUTPUT_CAP_BYTES < len(log) < OUTPUT_CAP_BYTES + 200          # not the 30 MB it printed
+    assert log.rstrip().endswith(b"bytes were dropped")
+    assert b"this job wrote 31457280 bytes" in log
+    rows = _rows(where / "run")
+    assert rows["chatty"]["status"] == "ok" and rows["raw"]["status"] == "ok"
+
+
+@pytest.mark.slow
+def test_escape_sequences_reach_neither_terminal_nor_files(finished, tmp_path):
+    where, site, first = finished
+    rows = _rows(where / "run")
+    assert rows["escaper"]["status"] == "error"
+    assert "\\x1b]0;owned\\x07" in rows["escaper"]["message"]          # shown, spelled out
+    report = _cli(where, site, "report", "run", "--out", tmp_path / "rep")
+    assert report.returncode == 0, report.stderr
+    written = [(tmp_path / "rep" / "README.md").read_text(), (where / "run" / "results.csv").read_text()]
+    for text in [first.stdout, first.stderr, report.stdout, report.stderr, *written]:
+        assert "\x1b" not in text and "\x07" not in text and "\x9b" not in text
+    assert "\\x1b[2J" in written[0]
+    assert float(rows["raw"]["rms_error_nm"]) > 0 and rows["raw"]["status"] == "ok"
+
+
+@pytest.mark.slow
+def test_a_run_json_without_its_integrity_field_is_not_trusted(finished, tmp_path):
+    run, site = _copy(finished, tmp_path)
+    config = json.loads((run / "run.json").read_text())
+    del config["integrity"]
+    config["seeds"] = [0, 1, 2]
+    (run / "run.json").write_text(json.dumps(config))
+    text = (run / "results.csv").read_text()
+    raw_rms = _rows(run)["raw"]["rms_error_nm"]
+    (run / "results.csv").write_text(text.replace(raw_rms, "0.0001"))
+    report = _cli(tmp_path, site, "report", run, "--out", "rep")
+    assert report.returncode == 0, report.stderr
+    assert "run.json: has no integrity field" in report.stderr and "its rows are not verified" in report.stderr
+    resumed = _cli(tmp_path, site, "run", "--resume", run, "--no-progress")
+    assert resumed.returncode == 2
+    assert resumed.stderr.strip().splitlines() == [
+        f"rippleb: error: {run / 'run.json'}: has no integrity field (deleted, or written before rippleb kept "
+        "keyed hashes, or where no key could be written); rippleb will not resume a run it cannot vouch for: "
+        "start it again with another --out"]
+    assert "0.0001" in (run / "results.csv").read_text()       # nothing rewritten, nothing run
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("planted", ["a log", "logs", "results.csv", "rows.mac", ".lock"])
+def test_no_write_follows_a_symbolic_link_in_the_run_directory(finished, tmp_path, planted):
+    run, site = _copy(finished, tmp_path)
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    (victim / "precious.txt").write_text("precious\n")
+    lines = (run / "results.csv").read_text().splitlines(keepends=True)
+    (run / "results.csv").write_text("".join(line for line in lines if not line.startswith("raw,")))
+    target = {"a log": run / "logs" / ROW_LOG.format("raw"), "logs": run / "logs"}.get(planted, run / planted)
+    shutil.rmtree(target) if target.is_dir() else target.unlink()
+    target.symlink_to(victim if planted == "logs" else victim / "precious.txt")
+    resumed = _cli(tmp_path, site, "run", "--resume", run, "--no-progress")
+    assert resumed.returncode == 2
+    assert resumed.stderr.strip().splitlines() == [
+        f"rippleb: error: {target}: a symbolic link, which rippleb never makes in a run directory; rippleb "
+        "does not write through it: remove it, or choose another --out"]
+    assert sorted(p.name for p in victim.iterdir()) == ["precious.txt"]
+    assert (victim / "precious.txt").read_text() == "precious\n"
+
+
+def test_a_memory_limit_no_kernel_can_hold_is_one_line(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "rippleb", "run", "--methods", "raw", "--scenarios",
+                           "static-contact", "--seeds", "1", "--memory-limit", "1e13", "--out", "out"],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        "rippleb: error: --memory-limit 1e+13 MB is more than the 134217728 MB (128 TiB) address space of a "
+        "process: the kernel cannot hold a job to it; give 0 for no limit"]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_largest_memory_limit_still_runs(tmp_path):
+    import rippleb
+    from rippleb.engine.checks import MAX_MEMORY_MB
+
+    frame = rippleb.run(["raw"], ["static-contact"], [0], memory_mb=MAX_MEMORY_MB, progress=False)
+    assert frame.status.tolist() == ["ok"], frame.message.tolist()
+
+
+# ----------------------------------------------------------------------------- units
+
+
+@settings(max_examples=300, derandomize=True, deadline=None)
+@given(st.text())
+def test_escaped_text_holds_no_control_character_and_loses_nothing_printable(text):
+    def control(c):
+        return ord(c) < 0x20 or 0x7f <= ord(c) <= 0x9f or c in "\u2028\u2029"
+
+    shown = escaped(text)
+    assert not any(map(control, shown))
+    if any(map(control, text)):
+        assert len(shown) > len(text)
+    else:
+        assert shown == text
+
+
+def test_escaped_spells_an_escape_sequence_out():
+    assert escaped("a\x1b[2Jb\nc") == "a\\x1b[2Jb\\x0ac"
+
+
+@pytest.mark.parametrize("sizes", [[10], [OUTPUT_CAP_BYTES], [OUTPUT_CAP_BYTES - 5, 10, 3 * 2**16]])
+def test_a_job_log_keeps_the_cap_and_says_what_it_dropped(tmp_path, sizes):
+    path = tmp_path / "log.txt"
+    log = JobLog(str(path))
+    log.open()
+    written = 0
+    for size in sizes:
+        data = bytes([65 + len(str(size)) % 26]) * size
+        view = memoryview(data)
+        while view:   # the pipe holds 64 kB: drain between writes, as the keeper does
+            view = view[os.write(log.write_fd, view[:2**16]):]
+            log.drain()
+        written += size
+    os.close(log.write_fd)
+    log.close()
+    kept = path.read_bytes()
+    if written <= OUTPUT_CAP_BYTES:
+        assert len(kept) == written
+    else:
+        assert kept[:OUTPUT_CAP_BYTES].count(b"\n") == 0 and len(kept) > OUTPUT_CAP_BYTES
+        assert kept[OUTPUT_CAP_BYTES:].decode().strip() == (
+            f"rippleb: this job wrote {written} bytes; its log keeps the first {OUTPUT_CAP_BYTES} (8 MiB), "
+            f"{written - OUTPUT_CAP_BYTES} bytes were dropped")
+
+
+def test_a_job_log_never_opens_through_a_link(tmp_path):
+    (tmp_path / "precious").write_text("precious\n")
+    (tmp_path / "log.txt").symlink_to(tmp_path / "precious")
+    log = JobLog(str(tmp_path / "log.txt"))
+    log.open()
+    os.write(log.write_fd, b"hostile output\n")
+    os.close(log.write_fd)
+    log.close()
+    assert (tmp_path / "precious").read_text() == "precious\n"

@@ -283,6 +283,6 @@ def _warn_unsealed(run_dir: Path, config: dict) -> None:
     if config:
         warnings.warn(f"{run_dir / 'run.json'}: {UNSEALED}; its rows are not verified", IntegrityWarning,
                       stacklevel=4)
-    elif (run_dir / LEDGER).exists():
-        warnings.warn(f"{run_dir}: holds {LEDGER} but no readable run.json (deleted?); its rows are not "
+    elif (run_dir / LEDGER).exists() and not (run_dir / "run.json").exists():
+        warnings.warn(f"{run_dir}: holds {LEDGER} but no run.json (deleted?); its rows are not "
                       f"verified", IntegrityWarning, stacklevel=4)

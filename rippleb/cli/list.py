@@ -106,6 +106,7 @@ def probe_plugins(registry, timeout: float) -> tuple[dict[str, str], dict[str, s
     line}`` of those that loaded. The parent never runs plugin code, so a plugin that
     hangs or exits at import delays only itself."""
     from rippleb.errors import PluginError
+    from rippleb.engine.isolation import Confinement
     from rippleb.engine.pool import Pool
 
     def job(entry):
@@ -119,7 +120,7 @@ def probe_plugins(registry, timeout: float) -> tuple[dict[str, str], dict[str, s
     while pending or pool.busy:
         while pending and pool.free:
             name = pending.pop(0)
-            pool.submit(name, job(registry.entries[name]), timeout, confine=())
+            pool.submit(name, job(registry.entries[name]), timeout, confine=Confinement())
         for fin in pool.wait():
             if fin.kind == "done":
                 docs[fin.key] = bytes(fin.value).decode(errors="replace")

@@ -22,12 +22,14 @@ import gc
 import os
 import resource
 import select
+import shutil
 import signal
 import sys
+import tempfile
 import traceback
 
 from rippleb import integrity
-from rippleb.engine import isolation
+from rippleb.engine import isolation, sandbox
 from rippleb.engine.joblog import JobLog
 from rippleb.registry import one_line
 
@@ -36,8 +38,9 @@ def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output, confine=None) -> N
     """rippleb's own process between the runner and a job: session, namespaces, cleanup.
     Runs ``fn()`` in a worker it forks; never returns.
 
-    ``confine`` is None for rippleb's own jobs (simulations), else the directories a
-    method's worker must not write (:func:`rippleb.engine.isolation.confine_files`)."""
+    ``confine`` is None for rippleb's own jobs (simulations), else what a method's worker
+    must not touch (:class:`rippleb.engine.isolation.Confinement`); such a worker gets a
+    scratch directory of its own, the one place it may write, removed when it ends."""
     try:
         # First: Ctrl-C reaches the runner's whole process group, and what is inherited
         # from the runner until here is its handler (the runner decides what a signal ends).
@@ -49,8 +52,11 @@ def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output, confine=None) -> N
         isolation.not_dumpable()   # its descriptors (the control pipe) out of the worker's reach
         log = JobLog(output)
         log.open()   # before the worker can change what the run directory's paths lead to
+        confine = None if confine is None else _as_confinement(confine)
+        scratch = tempfile.mkdtemp(prefix="rippleb-scratch-", dir=confine.scratch_in) if confine is not None else None
         isolated, own_mounts = isolation.new_namespaces()
         isolation.become_subreaper()
+        go_r, go_w = os.pipe()   # the worker starts once the keeper has named it (below)
         worker = os.fork()
         if worker == 0:
             # Its own process group: a worker that signals "its" group (killpg(0, ...), or
@@ -58,18 +64,24 @@ def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output, confine=None) -> N
             # must not reach the keeper, whose death would lose the row it reports.
             os.setpgid(0, 0)
             os.close(ctrl_w)
+            os.close(go_w)
             log.give_to_worker()
-            _worker(fn, result_w, memory_mb, confine if isolated and own_mounts else None,
-                    confine is not None)  # never returns
+            os.read(go_r, 1)   # a job that writes into the control pipe must not get there first
+            os.close(go_r)
+            _worker(fn, result_w, memory_mb, confine, scratch, isolated and own_mounts)  # never returns
         os.close(result_w)
         os.close(log.write_fd)
         _write_all(ctrl_w, f"{worker} {int(isolated)}\n".encode())
+        os.close(go_r)
+        os.close(go_w)   # the worker's read returns: it may start
         status = _wait_worker(worker, ctrl_w, log)
         if isolated:  # the kernel ended the namespace with its first process: nothing left to hunt
             isolation.reap_exited()
         else:
             isolation.end_descendants()
         log.close()   # the log is whole before the runner hears the job ended
+        if scratch is not None:
+            shutil.rmtree(scratch, ignore_errors=True)
         _write_all(ctrl_w, f"{os.waitstatus_to_exitcode(status)}\n".encode())
     finally:
         os._exit(0)
@@ -110,15 +122,15 @@ def _wait_worker(worker: int, ctrl_w: int, log: JobLog) -> int:
         os.close(pidfd)
 
 
-def _worker(fn, result_w: int, memory_mb, confine, untrusted: bool) -> None:
+def _worker(fn, result_w: int, memory_mb, confine, scratch, own_mounts: bool) -> None:
     message = b"R" + b"worker did not start"
     try:
         _keep_inherited_pages_shared()
         isolation.die_with_parent()
         isolation.close_fds_except(result_w)
         _rebind_output()
-        if untrusted:
-            _confine(confine)
+        if confine is not None:
+            _confine(confine, scratch, own_mounts)
         _limit_memory(memory_mb)
         try:
             payload = fn()
@@ -135,11 +147,25 @@ def _worker(fn, result_w: int, memory_mb, confine, untrusted: bool) -> None:
         os._exit(0)
 
 
-def _confine(read_only) -> None:
-    """Close what the kernel lets a method's worker close off (docs/robustness.md); say on
-    its own log what it could not, so a reader of the row's log knows the run was open."""
-    missing = (["a mount namespace"] if read_only is None
-               else isolation.confine_files(read_only, hidden_files=[integrity.key_path()]))
+def _as_confinement(confine) -> isolation.Confinement:
+    """``confine`` as a :class:`~rippleb.engine.isolation.Confinement` (a bare sequence:
+    the read-only directories)."""
+    return confine if isinstance(confine, isolation.Confinement) else isolation.Confinement(tuple(confine))
+
+
+def _confine(confine: isolation.Confinement, scratch: str, own_mounts: bool) -> None:
+    """In a method's worker, before its code runs: close what the kernel lets it close off
+    (docs/robustness.md), mounts first (:mod:`rippleb.engine.isolation`), then the walls
+    that keep them (:mod:`rippleb.engine.sandbox`); say on its own log what it could not,
+    so a reader of the row's log knows the run was open. Its command line (the runner's,
+    which may name a salt file) is wiped, and its temporary files go to ``scratch``."""
+    hidden = [integrity.key_path(), *confine.hidden]
+    missing = (isolation.confine_files(confine.read_only, hidden_files=hidden) if own_mounts
+               else ["a mount namespace"])
+    os.environ["TMPDIR"] = scratch
+    tempfile.tempdir = None
+    sandbox.wipe_command_line()
+    missing += sandbox.lock_down(scratch, nested_namespace=own_mounts and not missing)
     if missing:
         print(f"rippleb: this worker is not confined: no {', no '.join(missing)} (the kernel refused)",
               file=sys.stderr)

@@ -226,3 +226,150 @@ def test_a_job_log_never_opens_through_a_link(tmp_path):
     os.close(log.write_fd)
     log.close()
     assert (tmp_path / "precious").read_text() == "precious\n"
+
+
+# ----------------------------------------------------------------------------- the walls (items 1, 2)
+
+#: A method that tries every attack of the issue on the walls around its process, from its
+#: ``reset``, and raises what it achieved as JSON: its row's message is the one way out
+#: that works on a Dask worker too (it can write nowhere but its scratch directory).
+BREAKER = textwrap.dedent(r"""
+    import ctypes, json, os, sys, sysconfig
+    import numpy as np
+    from rippleb import Method
+
+    libc = ctypes.CDLL(None, use_errno=True)
+
+    def _call(fn, *args):
+        return 0 if fn(*args) == 0 else ctypes.get_errno()
+
+    def _open_write(path, flags=os.O_WRONLY | os.O_APPEND):
+        try:
+            os.close(os.open(path, flags, 0o644))
+        except OSError as exc:
+            return exc.errno
+        return 0
+
+    def _read(path):
+        try:
+            with open(path, "rb") as fh:
+                return len(fh.read())
+        except OSError as exc:
+            return -exc.errno
+
+    def attack():
+        import rippleb
+        from rippleb.integrity import key_path
+        run_dir, key = os.environ["HOSTILE_RUN_DIR"], str(key_path())
+        targets = {"proc": "/proc", "run": run_dir, "key": key}
+        found = {"umount": {k: _call(libc.umount2, p.encode(), 2) for k, p in targets.items()}}
+        found["umount_lazy"] = {k: _call(libc.umount2, p.encode(), 2 | 8) for k, p in targets.items()}
+        found["remount_rw"] = _call(libc.mount, None, run_dir.encode(), None, 32 | 4096, None)
+        found["key_bytes"] = _read(key)
+        found["salt_bytes"] = _read(os.environ["HOSTILE_SALT"]) if os.environ.get("HOSTILE_SALT") else None
+        found["cmdline_names_salt"] = b"salt" in open("/proc/self/cmdline", "rb").read()
+        found["unshare"] = _call(libc.unshare, 0x10000000)
+        found["ptrace"] = _call(libc.ptrace, 16, 1, None, None)   # PTRACE_ATTACH to PID 1
+        found["cap_eff"] = [l.split()[1] for l in open("/proc/self/status") if l.startswith("CapEff")][0]
+        found["pids"] = sorted(int(p) for p in os.listdir("/proc") if p.isdigit())
+        package = os.path.dirname(rippleb.__file__)
+        found["write_package"] = _open_write(os.path.join(package, "report", "tables.py"))
+        found["plant_pth"] = _open_write(os.path.join(sysconfig.get_paths()["purelib"], "zz_hostile_probe.pth"),
+                                         os.O_WRONLY | os.O_CREAT | os.O_EXCL)
+        found["write_run_dir"] = _open_write(os.path.join(run_dir, "forged.txt"), os.O_WRONLY | os.O_CREAT)
+        found["write_home"] = _open_write(os.path.join(os.path.expanduser("~"), "zz_hostile_probe"),
+                                          os.O_WRONLY | os.O_CREAT | os.O_EXCL)
+        scratch = os.path.join(os.environ.get("TMPDIR", "/tmp"), "mine.txt")
+        found["write_scratch"] = _open_write(scratch, os.O_WRONLY | os.O_CREAT)
+        # Its row's message is the one channel out that works locally and on a Dask worker.
+        raise RuntimeError("HOSTILE " + json.dumps(found, separators=(",", ":")))
+
+    class Breaker(Method):
+        name = "breaker"
+        def reset(self, spec):
+            attack()
+        def step(self, block):
+            return np.zeros(len(block))
+""")
+
+
+def _found(run):
+    message = _rows(run)["breaker"]["message"]
+    return json.loads(message[message.index("HOSTILE ") + len("HOSTILE "):])
+
+
+def _assert_walls_held(found, run):
+    import errno
+
+    assert set(found["umount"].values()) | set(found["umount_lazy"].values()) == {errno.EPERM}, found
+    assert found["remount_rw"] == errno.EPERM
+    assert found["key_bytes"] == 0                        # /dev/null over the key, and it stayed
+    assert found["unshare"] == errno.EPERM and found["ptrace"] == errno.EPERM
+    assert int(found["cap_eff"], 16) == 0
+    assert found["pids"] == [1]
+    for attack in ("write_package", "plant_pth", "write_run_dir", "write_home"):
+        assert found[attack] in (errno.EACCES, errno.EROFS, errno.EPERM), (attack, found[attack])
+    assert found["write_scratch"] == 0                     # the one place it may write
+    assert not (run / "forged.txt").exists()
+
+
+@pytest.fixture(scope="module")
+def breaker_site(tmp_path_factory):
+    site = tmp_path_factory.mktemp("breaker-site")
+    _dist(site, "rippleb-breaker", "rippleb_breaker", BREAKER, {"breaker": "Breaker"})
+    yield site
+    import sysconfig
+
+    planted = os.path.join(sysconfig.get_paths()["purelib"], "zz_hostile_probe.pth")
+    assert not os.path.exists(planted), "the breaker planted a .pth in site-packages"
+
+
+@pytest.mark.slow
+def test_a_resumed_sealed_run_keeps_the_walls_and_the_salt(breaker_site, tmp_path):
+    """The issue's cases 1, 2, 4: unmounting the covers, writing rippleb's code or a .pth,
+    reading the key, and, in a sealed run resumed with --salt-file FILE, reading the salt
+    (its path on the command line, or guessed). The raw row beside it is untouched."""
+    from rippleb.engine.sandbox import missing_protections
+
+    if missing_protections():
+        pytest.skip(f"this kernel grants no {missing_protections()}")
+    run, salt = tmp_path / "run", tmp_path / "salt"
+    first = _cli(tmp_path, breaker_site, "run", "--methods", "raw", "--scenarios", "static-contact", "--seeds", "1",
+                 "--no-progress", "--sealed", salt, "--out", run)
+    assert first.returncode == 0, first.stderr
+    before = _rows(run)["raw"]
+    os.environ["HOSTILE_RUN_DIR"], os.environ["HOSTILE_SALT"] = str(run), str(salt)
+    try:
+        resumed = _cli(tmp_path, breaker_site, "run", "--resume", run, "--methods", "raw,breaker", "--salt-file",
+                       salt, "--no-progress")
+    finally:
+        del os.environ["HOSTILE_RUN_DIR"], os.environ["HOSTILE_SALT"]
+    assert resumed.returncode == 0, resumed.stderr
+    found = _found(run)
+    _assert_walls_held(found, run)
+    assert found["salt_bytes"] == 0 and found["cmdline_names_salt"] is False
+    rows = _rows(run)
+    kept = ("status", "rms_error_nm", "max_error_nm", "seed", "scenario_sha256")
+    assert {k: rows["raw"][k] for k in kept} == {k: before[k] for k in kept}   # untouched by the resume
+    assert rows["breaker"]["status"] == "error"   # it raised its findings
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("executor", ["local", "dask"])
+def test_the_walls_hold_as_root_and_on_dask(breaker_site, tmp_path, executor):
+    from rippleb.engine.sandbox import missing_protections
+
+    if missing_protections():
+        pytest.skip(f"this kernel grants no {missing_protections()}")
+    run = tmp_path / "run"
+    os.environ["HOSTILE_RUN_DIR"] = str(run)
+    try:
+        proc = _cli(tmp_path, breaker_site, "run", "--methods", "raw,breaker", "--scenarios", "static-contact",
+                    "--seeds", "1", "--jobs", "2", "--no-progress", "--executor", executor, "--out", run)
+    finally:
+        del os.environ["HOSTILE_RUN_DIR"]
+    assert proc.returncode == 0, proc.stderr
+    _assert_walls_held(_found(run), run)
+    rows = _rows(run)
+    assert rows["raw"]["status"] == "ok" and rows["breaker"]["status"] == "error"
+    assert float(rows["raw"]["rms_error_nm"]) == pytest.approx(1.7996, abs=1e-3)   # raw's own, as in any run

@@ -15,6 +15,7 @@ import shutil
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import pandas as pd
 import pytest
@@ -373,3 +374,37 @@ def test_the_walls_hold_as_root_and_on_dask(breaker_site, tmp_path, executor):
     rows = _rows(run)
     assert rows["raw"]["status"] == "ok" and rows["breaker"]["status"] == "error"
     assert float(rows["raw"]["rms_error_nm"]) == pytest.approx(1.7996, abs=1e-3)   # raw's own, as in any run
+
+
+@pytest.mark.slow
+def test_the_walls_hold_for_an_unprivileged_user(breaker_site):
+    """The same attacks by a run of uid 65534 (``nobody``): its namespaces, Landlock and
+    seccomp are all an unprivileged user's to set up, and none of its protections is missing."""
+    import tempfile
+
+    if os.geteuid() != 0:
+        pytest.skip("needs root to run as uid 65534")
+    home = Path(tempfile.mkdtemp(prefix="rippleb-nobody-"))   # pytest's tmp_path is root's alone
+    try:
+        shutil.copytree(breaker_site, home / "site")
+        for path in [home, *home.rglob("*")]:
+            os.chown(path, 65534, 65534)
+        env = {**os.environ, "HOME": str(home), "TMPDIR": str(home), "PYTHONPATH": str(home / "site"),
+               "RIPPLEB_KEY_FILE": str(home / "key"), "HOSTILE_RUN_DIR": str(home / "run")}
+        # setpriv, not subprocess's user=: it changes the ids as it execs, so this Python,
+        # under root's home here, can still be started; the run itself is uid 65534's, no capability
+        setpriv = shutil.which("setpriv")
+        if setpriv is None:
+            pytest.skip("no setpriv to start a process as uid 65534")
+        proc = subprocess.run([setpriv, "--reuid=65534", "--regid=65534", "--clear-groups", sys.executable, "-m",
+                               "rippleb", "run", "--methods", "raw,breaker", "--scenarios", "static-contact",
+                               "--seeds", "1", "--jobs", "2", "--no-progress", "--out", "run"],
+                              capture_output=True, text=True, env=env, cwd=home, timeout=600)
+        if proc.returncode != 0 and "Permission denied" in proc.stderr:
+            pytest.skip(f"uid 65534 cannot run this Python: {proc.stderr.strip()[-200:]}")
+        assert proc.returncode == 0, proc.stderr
+        assert "warning" not in proc.stderr, proc.stderr      # every protection granted to nobody too
+        _assert_walls_held(_found(home / "run"), home / "run")
+        assert _rows(home / "run")["raw"]["status"] == "ok"
+    finally:
+        shutil.rmtree(home, ignore_errors=True)

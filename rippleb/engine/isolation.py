@@ -96,13 +96,25 @@ def new_namespaces() -> tuple[bool, bool]:
 
 
 def map_ids(uid: int, gid: int) -> None:
-    """Map this process's user and group ids onto themselves in its new user namespace."""
+    """Map this process's user and group ids onto themselves in its new user namespace.
+
+    A process that is not dumpable has its ``/proc/self`` files owned by root, which an
+    unprivileged user's new namespace cannot write; so it is dumpable for these writes
+    (as an unprivileged user the ids stayed unmapped, and a second, nested namespace,
+    which needs mapped ids, was refused: issue 34). Nothing can name it meanwhile: its
+    jobs run in PID namespaces of their own."""
+    was = libc().prctl(PR_GET_DUMPABLE, 0, 0, 0, 0)
+    if was == 0:
+        dumpable_again()
     try:
         _write("/proc/self/setgroups", "deny")
         _write("/proc/self/uid_map", f"{uid} {uid} 1")
         _write("/proc/self/gid_map", f"{gid} {gid} 1")
     except OSError:
         pass  # unmapped ids still work for file access under the caller's credentials
+    finally:
+        if was == 0:
+            not_dumpable()
 
 
 @contextlib.contextmanager

@@ -333,7 +333,7 @@ def test_a_resumed_sealed_run_keeps_the_walls_and_the_salt(breaker_site, tmp_pat
     from rippleb.engine.sandbox import missing_protections
 
     if missing_protections():
-        pytest.skip(f"this kernel grants no {missing_protections()}")
+        pytest.skip(f"this kernel does not grant {missing_protections()}")
     run, salt = tmp_path / "run", tmp_path / "salt"
     first = _cli(tmp_path, breaker_site, "run", "--methods", "raw", "--scenarios", "static-contact", "--seeds", "1",
                  "--no-progress", "--sealed", salt, "--out", run)
@@ -361,7 +361,7 @@ def test_the_walls_hold_as_root_and_on_dask(breaker_site, tmp_path, executor):
     from rippleb.engine.sandbox import missing_protections
 
     if missing_protections():
-        pytest.skip(f"this kernel grants no {missing_protections()}")
+        pytest.skip(f"this kernel does not grant {missing_protections()}")
     run = tmp_path / "run"
     os.environ["HOSTILE_RUN_DIR"] = str(run)
     try:
@@ -408,3 +408,27 @@ def test_the_walls_hold_for_an_unprivileged_user(breaker_site):
         assert _rows(home / "run")["raw"]["status"] == "ok"
     finally:
         shutil.rmtree(home, ignore_errors=True)
+
+
+def test_a_kernel_that_grants_less_is_said_once_and_refuses_sealed_runs(tmp_path, monkeypatch):
+    """Landlock refused (as on a kernel without it): an unsealed run warns once, naming it,
+    and its rows run; a sealed run is refused before it claims anything."""
+    import warnings
+
+    import rippleb
+    from rippleb.engine import sandbox
+    from rippleb.errors import InputError
+
+    monkeypatch.setattr(sandbox, "_landlock", lambda scratch: False)
+    assert sandbox.missing_protections() == ("Landlock (a read-only file system but its scratch directory)",)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        frame = rippleb.run(["raw"], ["static-contact"], [0], progress=False)
+    said = [str(w.message) for w in caught if "does not grant" in str(w.message)]
+    assert said == ["this kernel does not grant a method's process Landlock (a read-only file system but its "
+                    "scratch directory): it can reach more than docs/robustness.md says (section 10)"]
+    assert frame.status.tolist() == ["ok"]
+    with pytest.raises(InputError, match="--sealed needs every wall around a method's process, and this kernel "
+                                         "does not grant Landlock"):
+        rippleb.run(["raw"], ["static-contact"], [0], out=tmp_path / "run", sealed=tmp_path / "salt", progress=False)
+    assert not (tmp_path / "run").exists() and not (tmp_path / "salt").exists()

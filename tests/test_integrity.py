@@ -262,13 +262,15 @@ def test_a_plugin_cannot_rewrite_the_cache(site, tmp_path):
 
 def test_where_the_cache_is_writable_a_rewrite_fails_the_rows_it_tampered(tmp_path, monkeypatch,
                                                                             register_methods):
-    """Without a mount namespace (a kernel that refuses it) the worker can write the cache;
-    the SHA-256 of every cached file, taken before any method ran, still catches it."""
-    from rippleb.engine import isolation
+    """Without a mount namespace and without Landlock (a kernel that refuses both) the worker
+    can write the cache; the SHA-256 of every cached file, taken before any method ran, still
+    catches it. (With Landlock alone the rewrite is refused: tests/test_hostile.py.)"""
+    from rippleb.engine import isolation, sandbox
 
     namespace = {}
     exec(HOSTILE, namespace)
     monkeypatch.setattr(isolation, "NAMESPACE_CHOICES", isolation.NAMESPACE_CHOICES[1:])  # no mount namespace
+    monkeypatch.setattr(sandbox, "_landlock", lambda scratch: False)                       # nor Landlock
     (tmp_path / "tmp").mkdir()
     monkeypatch.setenv("TMPDIR", str(tmp_path / "tmp"))   # the forger rewrites this run's cache only
     monkeypatch.setattr("tempfile.tempdir", None)

@@ -259,20 +259,19 @@ def say_missing(sealed: bool) -> None:
     missing = missing_protections()
     if not missing:
         return
-    lacking = "no " + ", no ".join(missing)
+    lacking = "; ".join(missing)
     if sealed:
-        raise InputError(f"--sealed needs every wall around a method's process, and this kernel grants {lacking}; "
-                         f"a method could reach the salt: run sealed comparisons where it grants them "
+        raise InputError(f"--sealed needs every wall around a method's process, and this kernel does not grant "
+                         f"{lacking}; a method could reach the salt: run sealed comparisons where it does "
                          f"(docs/robustness.md, section 10)")
-    warnings.warn(f"this kernel grants a method's process {lacking}: it can reach more than docs/robustness.md "
-                  f"says (section 10)", RunWarning, stacklevel=3)
+    warnings.warn(f"this kernel does not grant a method's process {lacking}: it can reach more than "
+                  f"docs/robustness.md says (section 10)", RunWarning, stacklevel=3)
 
 
-@functools.cache
 def missing_protections() -> tuple[str, ...]:
-    """What this kernel does not grant a method's worker, asked once per process: a forked
-    keeper-like child takes the namespaces, and its child the worker's own steps (mounts,
-    :func:`lock_down`), and reports what failed."""
+    """What this kernel does not grant a method's worker, asked anew each run (a fork, 20 ms):
+    a forked keeper-like child takes the namespaces, and its child the worker's own steps
+    (mounts, :func:`lock_down`), and reports what failed."""
     read_fd, write_fd = os.pipe()
     pid = os.fork()
     if pid == 0:

@@ -30,7 +30,9 @@ HOSTILE = textwrap.dedent('''
     def _cache_files():
         """Every cache file a plugin could find: the temporary directory, the run directory
         below the working directory, and the directories of its inherited file descriptors."""
-        found = glob.glob(os.path.join(tempfile.gettempdir(), "rippleb-cache-*", "*"))
+        tmp = tempfile.gettempdir()   # its scratch directory, two levels below the run's (issue 34)
+        found = [path for root in (tmp, os.path.dirname(os.path.dirname(tmp)))
+                 for path in glob.glob(os.path.join(root, "rippleb-cache-*", "*"))]
         found += glob.glob(os.path.join("*", ".cache", "*"))
         for fd in os.listdir("/proc/self/fd"):
             try:

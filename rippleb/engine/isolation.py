@@ -42,6 +42,9 @@ MS_RELATIME = 1 << 21
 #: Where the terminals are: hidden from a method, which could otherwise write to rippleb's
 #: own terminal by opening its pseudo-terminal device (same user, same permissions).
 TERMINALS = "/dev/pts"
+#: A method's scratch directory: a tmpfs of its own, at most 1 GiB (its pages are memory
+#: that ``--memory-limit``'s address-space cap does not count).
+SCRATCH_OPTIONS = "size=1g,mode=0700"
 
 
 @functools.cache
@@ -178,12 +181,13 @@ class Confinement:
                    str(scratch_in) if scratch_in else None)
 
 
-def confine_files(read_only, hidden_files=()) -> list[str]:
+def confine_files(read_only, hidden_files=(), scratch=None) -> list[str]:
     """In a worker that is PID 1 of its own PID and mount namespaces: a /proc of its own
     namespace (the host's processes, its keeper's and the runner's descriptors out of
     sight), the terminals hidden (:data:`TERMINALS`), each existing directory of
-    ``read_only`` (the run directory, the cache) mounted read-only over itself, and each
-    existing file of ``hidden_files`` (rippleb's key) covered by ``/dev/null``.
+    ``read_only`` (the run directory, the cache) mounted read-only over itself, each
+    existing file of ``hidden_files`` (rippleb's key) covered by ``/dev/null``, and a
+    private tmpfs over ``scratch`` (:data:`SCRATCH_OPTIONS`), gone with the worker.
 
     Only this worker's view changes: its mount namespace is private (``MS_PRIVATE``), so
     nothing propagates back. Files it had opened before keep their access (its output
@@ -203,6 +207,8 @@ def confine_files(read_only, hidden_files=()) -> list[str]:
     for path in map(str, hidden_files):
         if os.path.isfile(path) and _mount(os.devnull, path, None, MS_BIND) != 0:
             missing.append(f"{path} hidden")
+    if scratch is not None and _mount("tmpfs", scratch, "tmpfs", MS_NOSUID | MS_NODEV, SCRATCH_OPTIONS) != 0:
+        missing.append("a scratch directory of its own")
     return missing
 
 

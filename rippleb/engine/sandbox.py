@@ -15,7 +15,8 @@ kernel's own mechanism, and none can be undone by the process it is applied to:
 2. **No new privileges** (``PR_SET_NO_NEW_PRIVS``): no set-uid program gives any back;
    required for the two steps after it.
 3. **Landlock** (landlock(7)): writing, creating, removing and renaming files is denied
-   everywhere but beneath the job's scratch directory (and ``/dev/null``): the rippleb
+   everywhere but beneath the job's scratch directory (a tmpfs of its own,
+   :data:`rippleb.engine.isolation.SCRATCH_OPTIONS`) and ``/dev/null``: the rippleb
    package, site-packages, ``$HOME``, the run directory and the cache are read-only.
 4. **seccomp** through libseccomp (the library behind Docker's, systemd's and Flatpak's
    filters): :data:`DENIED_CALLS` fail with ``EPERM``, a ``clone`` that asks for a new

@@ -27,8 +27,8 @@ kernel's own mechanism, and none can be undone by the process it is applied to:
 
 Nothing here execs: the fork server's preloaded worker keeps its imports. Where the kernel
 grants less (no user namespaces, no Landlock, no libseccomp), the steps it grants are
-still taken and :func:`lock_down` names the rest; :func:`missing_protections` asks once per
-process, so a run can say what it lacks and ``--sealed`` can refuse.
+still taken and :func:`lock_down` names the rest; :func:`missing_protections` asks at the
+start of each run, so the run can say what it lacks and ``--sealed`` can refuse.
 """
 
 from __future__ import annotations

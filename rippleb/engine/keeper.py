@@ -186,6 +186,7 @@ def _confine(confine: isolation.Confinement, scratch: str, own_mounts: bool) -> 
                if own_mounts else ["a mount namespace"])
     os.environ["TMPDIR"] = scratch
     tempfile.tempdir = None
+    _numba_cache_into(scratch)
     sandbox.wipe_command_line()
     missing += sandbox.lock_down(scratch, nested_namespace=own_mounts and not missing)
     if missing:
@@ -196,6 +197,19 @@ def _confine(confine: isolation.Confinement, scratch: str, own_mounts: bool) -> 
         # be dumpable again, as a plain process is (a method that reads /proc/self/mem, /environ
         # or /io as an unprivileged user; those files belong to root in a process that is not).
         isolation.dumpable_again()
+
+
+def _numba_cache_into(scratch: str) -> None:
+    """numba keeps compiled functions beside their source or in ``$HOME``, both read-only to
+    a method's worker now, and a function with ``cache=True`` then fails as it is defined
+    ("no locator available"), e.g. rippleb.dsp imported by a plugin in ``rippleb list``'s
+    probe. Its cache goes to the scratch directory instead: a plugin's kernels compile in
+    each job (the fork server's built-in ones are compiled already). numba reads
+    ``NUMBA_CACHE_DIR`` when imported, and ``config.CACHE_DIR`` when a function is defined."""
+    os.environ["NUMBA_CACHE_DIR"] = scratch
+    config = sys.modules.get("numba.core.config")
+    if config is not None:
+        config.CACHE_DIR = scratch
 
 
 def _keep_inherited_pages_shared() -> None:

@@ -32,6 +32,11 @@ GRIDS = {
     "current-based": {"velocity_cutoff": (100.0, 200.0, 400.0), "accel_cutoff": (10.0, 25.0, 50.0),
                       "sign_width": (0.2, 0.5, 1.0)},
     "lowpass": {"cutoff_hz": (2, 5, 10, 20, 30, 50, 100, 200)},
+    "spatial-filter": {"q": (2.0, 4.0, 8.0, 16.0, 32.0), "fade_speed": (0.5, 1.6, 4.0, 8.0, 16.0),
+                       "speed_window": (2, 5, 10, 40)},
+    "fourier-lms": {"mu": (0.005, 0.02, 0.05, 0.2, 0.5), "bias_hz": (3.0, 10.0, 30.0, 100.0)},
+    "periodic-dob": {"bins": (250, 500, 1250), "memory_revs": (3.0, 10.0, 30.0, 100.0),
+                     "nominal_hz": (2.0, 10.0, 30.0)},
 }
 
 

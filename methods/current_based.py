@@ -195,6 +195,8 @@ class CurrentBased(Method):
     """
 
     name = "current-based"
+    description = ("motor current minus identified friction and inertia, then a low-pass "
+                   "(cutoff=130.0), as in the paper's comparison")
 
     def __init__(self, cutoff=130.0, velocity_cutoff=200.0, accel_cutoff=25.0, sign_width=0.5,
                  load_dependent=True):

@@ -41,6 +41,7 @@ class Lowpass(Method):
     """
 
     name = "lowpass"
+    description = "the raw estimate through a Butterworth low-pass (order=2, cutoff_hz=30.0)"
 
     def __init__(self, cutoff_hz: float = 30.0, order: int = 2):
         self.cutoff_hz = cutoff_hz

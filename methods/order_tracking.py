@@ -234,6 +234,8 @@ class OrderTracking(Method):
     """
 
     name = "order-tracking"
+    description = ("the paper: strain re-sampled at encoder positions, notches at orders 2, 4, 8 "
+                   "(q=30.0), dead zone, back propagation")
 
     def __init__(self, q: float = 30.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.0015,
                  dead_zone: bool = True, back_propagation: bool = True):
@@ -346,6 +348,8 @@ class OrderTrackingNoDeadzone(OrderTracking):
     """Ablation: hold the last filtered value during stops instead of switching to raw."""
 
     name = "order-tracking-no-deadzone"
+    description = ("order-tracking without its dead zone: holds the last filtered value during stops"
+                   " (dead_zone=false)")
 
     def __init__(self, q: float = 30.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.0015,
                  dead_zone: bool = False, back_propagation: bool = True):
@@ -357,6 +361,8 @@ class OrderTrackingNoBackprop(OrderTracking):
     """Ablation: restart the filter after a stop in steady state on the first new sample."""
 
     name = "order-tracking-no-backprop"
+    description = ("order-tracking without back propagation: restarts its notches in steady state "
+                   "(back_propagation=false)")
 
     def __init__(self, q: float = 30.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.0015,
                  dead_zone: bool = True, back_propagation: bool = False):

@@ -17,6 +17,7 @@ class Raw(Method):
     """
 
     name = "raw"
+    description = "strain times a gain plus an offset, both fitted by least squares on the calibration log"
 
     def fit(self, calibration):
         self.gain_, self.offset_ = fit_gain_offset(calibration.strain, calibration.torque_ref)

@@ -296,6 +296,7 @@ class SwitchedNotch(Method):
     """
 
     name = "switched-notch"
+    description = "time-domain notches at orders 2, 4, 8 (q=8.0), switched by encoder speed (Godler et al.)"
 
     def __init__(self, orders=(2, 4, 8), n_bands=None, min_speed=2.0, max_speed=50.0, q=8.0,
                  hysteresis=0.3, speed_window=80):

@@ -27,6 +27,7 @@ import numpy as np
 
 from rippleb.errors import InputError
 from rippleb.files import atomic_path
+from rippleb.timebase import check_steps, uniform_rate
 
 SENSOR_COLUMNS = ("t", "strain", "encoder", "current")
 #: Optional sensor columns: ``index`` is 1 on samples where the encoder's once-per-revolution
@@ -41,6 +42,11 @@ MAX_EXACT_COUNT = 2**53
 #: precision, and no instrument reads such a value (the strain ADC steps by 3e-4 V), so a
 #: column holding one was scaled or corrupted, and would be scored as if it were zero.
 SMALLEST_NORMAL = float(np.finfo(float).tiny)
+#: A torque above this many times the joint's rated torque would break the drive: Harmonic
+#: Drive catalogues rate the momentary peak of size-25 units at 4-7 times the rated torque.
+#: Simulated loads stay below it; a recorded log's estimate beyond it is not scored
+#: (:mod:`rippleb.scorable`).
+MAX_TORQUE_FACTOR = 10.0
 
 
 @dataclass(frozen=True)
@@ -178,7 +184,8 @@ def make_log(spec: JointSpec, columns: dict, *, source: str = "log", meta: dict 
     missing = [name for name in SENSOR_COLUMNS if name not in columns]
     if missing:
         raise InputError(f"{source}: missing column(s) {', '.join(missing)} "
-                         f"(a log needs {', '.join(SENSOR_COLUMNS)})")
+                         f"(a log needs {', '.join(SENSOR_COLUMNS)}; a DAQ's own names and units are "
+                         f"mapped in a joint file's [joint.columns], docs/your-joint.md)")
     arrays = {}
     for name in LOG_COLUMNS:
         if name not in columns or columns[name] is None:
@@ -210,10 +217,7 @@ def make_log(spec: JointSpec, columns: dict, *, source: str = "log", meta: dict 
     if (steps <= 0).any():
         row = int(np.argmax(steps <= 0)) + 1
         raise InputError(f"{source}: column t must strictly increase (row {row} repeats or goes back)")
-    if len(steps) and steps.max() > 1.5 * np.median(steps):
-        row = int(np.argmax(steps > 1.5 * np.median(steps))) + 1
-        raise InputError(f"{source}: column t has a gap of {steps[row - 1]:.6g} s at row {row} "
-                         f"(sample period {np.median(steps):.6g} s); rippleb needs an unbroken log")
+    check_steps(arrays["t"], source)
     encoder = arrays["encoder"]
     if not np.array_equal(encoder, np.round(encoder)):
         raise InputError(f"{source}: column encoder must hold integer counts")
@@ -253,19 +257,33 @@ def _duplicated_columns(path: Path, suffix: str) -> list[str]:
     return sorted({n for n in names if n in LOG_COLUMNS and names.count(n) > 1})
 
 
-def read_log(path: str | Path, spec: JointSpec | None = None) -> SensorLog:
+def read_log(path: str | Path, spec: JointSpec | None = None, *, joint=None,
+             resample: bool = False) -> SensorLog:
     """Read a log from CSV or Parquet and check its schema.
 
     Parameters
     ----------
     path
         A ``.csv`` or ``.parquet`` file with at least the columns ``t, strain,
-        encoder, current``; ``torque_ref`` and ``torque_true`` are optional.
+        encoder, current`` (or the columns its joint description maps onto them);
+        ``index``, ``torque_ref`` and ``torque_true`` are optional.
     spec
-        The joint the log was recorded on. By default :class:`JointSpec` with ``fs``
-        taken from the median time step.
+        The joint the log was recorded on, used as it is (a joint description that gives
+        another value is refused). By default :class:`JointSpec`
+        with the values the joint description gives and ``fs`` the mean rate of ``t``
+        (:func:`rippleb.timebase.uniform_rate`).
+    joint
+        A :class:`~rippleb.joint_file.JointDescription` or the path of a ``joint.toml``;
+        the log's sidecar (``rec.toml`` beside ``rec.csv``) overrides it key by key.
+    resample
+        Put a log whose time stamps jitter on a uniform grid at its mean rate
+        (:func:`rippleb.timebase.resample`); without it such a log is refused.
+
+    ``meta["joint"]`` lists, per value the log is read with, whether it was given or assumed.
     """
     import pandas as pd
+
+    from rippleb import joint_file
 
     path = Path(path)
     suffix = path.suffix.lower()
@@ -273,6 +291,8 @@ def read_log(path: str | Path, spec: JointSpec | None = None) -> SensorLog:
         raise InputError(f"{path}: unsupported log format {suffix or '(none)'!r}; use .csv or .parquet")
     if not path.is_file():
         raise InputError(f"{path}: no such file")
+    given = joint_file.load_joint(joint) if isinstance(joint, (str, Path)) else joint
+    description = joint_file.description_for(path, given)
     twice = _duplicated_columns(path, suffix)
     if twice:
         raise InputError(f"{path}: column {', '.join(twice)} appears more than once; keep one")
@@ -280,17 +300,63 @@ def read_log(path: str | Path, spec: JointSpec | None = None) -> SensorLog:
         frame = pd.read_csv(path) if suffix == ".csv" else pd.read_parquet(path)
     except Exception as exc:  # pandas raises many types for unreadable files
         raise InputError(f"{path}: cannot read as {suffix[1:]}: {str(exc).splitlines()[0]}") from None
-    columns = {name: frame[name].to_numpy() for name in frame.columns if name in LOG_COLUMNS}
-    if spec is None:
-        spec = JointSpec()
-        if len(frame) > 1 and "t" in columns:
-            try:
-                dt = float(np.median(np.diff(np.asarray(columns["t"], dtype=float))))
-            except (TypeError, ValueError):  # a non-numeric t: make_log names the column
-                dt = float("nan")
-            if np.isfinite(dt) and dt > 0:
-                spec = dataclasses.replace(spec, fs=round(1.0 / dt, 6))
-    return make_log(spec, columns, source=str(path), meta={"source": str(path)})
+    columns, units = joint_file.map_columns(frame, description, str(path), LOG_COLUMNS)
+    if not joint_file.index_wanted(description, columns, str(path)):
+        columns.pop("index", None)
+        units.pop("index", None)
+    if resample:
+        columns = _resampled(columns, str(path))
+    if spec is not None:
+        joint_file.check_agrees(spec, description, str(path))
+    log = make_log(spec or _spec_from(description, columns, str(path)), columns, source=str(path),
+                   meta={"source": str(path)})
+    log.meta["joint"] = joint_file.describe(log.spec, description, units, log.index is not None,
+                                            spec_given=spec is not None)
+    return log
+
+
+def _spec_from(description, columns: dict, source: str) -> JointSpec:
+    """:class:`JointSpec` with the values ``description`` gives and ``fs`` the mean rate of ``t``."""
+    from rippleb import joint_file
+
+    spec = joint_file.with_spec(JointSpec(), description)
+    fs = _rate(columns.get("t"))
+    if np.isfinite(fs) and fs > 0:
+        spec = dataclasses.replace(spec, fs=round(fs, 6))
+    # an implausible rate from t is the run's to refuse, naming column t (engine.checks)
+    if "control_rate" in description.values and spec.control_rate > spec.fs:
+        raise InputError(f"{description.sources['control_rate']}: joint.control_rate: {spec.control_rate:g} Hz "
+                         f"exceeds {source}'s sample rate, {spec.fs:g} Hz")
+    return spec
+
+
+def _rate(t) -> float:
+    """The mean rate of a ``t`` column, NaN if it is not numeric (make_log names the column)."""
+    if t is None:
+        return float("nan")
+    try:
+        return uniform_rate(np.asarray(t, dtype=float))
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+def _resampled(columns: dict, source: str) -> dict:
+    """``columns`` on a uniform grid (:func:`rippleb.timebase.resample`) if they can be read as
+    numbers and ``t`` strictly increases without a gap; else as they are, for
+    :func:`make_log` to name what is wrong."""
+    from rippleb.timebase import resample
+
+    if any(_holds_booleans(np.asarray(v)) for k, v in columns.items() if k != "index"):
+        return columns
+    try:
+        numeric = {k: np.asarray(v, dtype=float) for k, v in columns.items()}
+    except (TypeError, ValueError):
+        return columns
+    t = numeric.get("t")
+    if t is None or len(t) < 2 or not np.isfinite(t).all() or (np.diff(t) <= 0).any():
+        return columns
+    check_steps(t, source, resampling=True)
+    return resample(numeric)
 
 
 def write_log(log: SensorLog, path: str | Path) -> Path:
@@ -301,13 +367,18 @@ def write_log(log: SensorLog, path: str | Path) -> Path:
     Arrow's writer is about ten times faster than pandas' formatter (0.06 against 0.6 s
     for paper-quintic's 80 000 rows).
     """
+    return write_columns(log.columns(), path)
+
+
+def write_columns(columns: dict[str, np.ndarray], path: str | Path) -> Path:
+    """Write named columns to CSV or Parquet as :func:`write_log` does (any column names)."""
     import pyarrow as pa
 
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".csv", ".parquet"):
         raise InputError(f"{path}: unsupported log format {suffix or '(none)'!r}; use .csv or .parquet")
-    table = pa.table(log.columns())
+    table = pa.table(columns)
     with atomic_path(path) as tmp:
         if suffix == ".csv":
             import pyarrow.csv as pa_csv

@@ -33,10 +33,15 @@ class Method:
     override :meth:`fit` to identify parameters from the calibration log and
     :meth:`reset` to clear streaming state. Constructor parameters are plain keyword
     arguments stored as attributes (scikit-learn's rule): derive anything else in
-    ``fit`` or ``reset``.
+    ``fit`` or ``reset``. A subclass may declare ``tunable = {"param": (low, high,
+    "log" | "linear" | "int"), ...}``, the constructor parameters worth tuning on the
+    calibration scenario and their ranges (``{}``: none); see docs/design.md.
     """
 
     name: str = ""
+    #: One line for ``rippleb list``: what the method does, with its default parameter
+    #: values written out. Empty: the first line of the class docstring, else of its module's.
+    description: str = ""
 
     def fit(self, calibration: SensorLog) -> None:
         """Identify parameters from a calibration log of the same device.
@@ -60,6 +65,21 @@ class Method:
         names = [p for p in inspect.signature(type(self).__init__).parameters if p != "self"]
         return {n: getattr(self, n) for n in names if hasattr(self, n)}
 
+    @classmethod
+    def summary(cls) -> str:
+        """What ``rippleb list`` says of the method: :attr:`description`, else the first line
+        of the class docstring, else of its module's docstring."""
+        import sys
+
+        module = sys.modules.get(cls.__module__)
+        return cls.description or first_line(cls.__doc__) or first_line(getattr(module, "__doc__", None))
+
     def __repr__(self) -> str:
         params = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
         return f"{type(self).__name__}({params})"
+
+
+def first_line(doc: str | None) -> str:
+    """The first non-empty line of a docstring, without reST's double back-quotes."""
+    lines = [line.strip() for line in (doc or "").strip().splitlines() if line.strip()]
+    return lines[0].replace("``", "") if lines else ""

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.fft import next_fast_len
 
+from rippleb.data import MAX_TORQUE_FACTOR
 from rippleb.response import (BAND_FRACTION, BAND_MIN_BINS, BAND_STEP, HALF_POWER,  # noqa: F401 - re-exported
                               STEP_BASELINE_S, STEP_HORIZON_S, STEP_MAX_RISE_S, bandwidth_hz, step_latency_ms)
 
@@ -25,6 +26,7 @@ RESTART_ANGLE_RAD = 4.0 * np.pi   # two wave-generator revolutions
 REST_HOLD_S = 0.010               # recorded logs: no encoder count for 10 ms is "at rest"
 DELAY_PEAK_FACTOR = 2.0           # delay_ms: lags whose misfit 1 - r is within 2x the best ...
 DELAY_PEAK_WIDTH_S = 0.025        # ... must all lie within 25 ms of it, else the peak is not distinct
+GEAR_TORQUE_FLOOR_NM = 1e-6      # gear_erased_fraction: below this RMS there is nothing to erase
 
 _MEMO: dict[int, dict] = {}       # id of a live Truth -> what Truth.remembered computed for it
 
@@ -33,13 +35,21 @@ _MEMO: dict[int, dict] = {}       # id of a live Truth -> what Truth.remembered 
 class Truth:
     """What the metrics compare an estimate with; the runner builds it, methods never see it.
 
-    ``torque_true`` and ``torque_ref`` may be None (a recorded log has no ``torque_true``).
+    ``torque_true`` and ``torque_ref`` may be None (a recorded log has no ``torque_true``);
+    ``torque_gear`` is the part of ``torque_true`` the gear's transmission error adds
+    (:mod:`rippleb.simulator.transmission`; None for a recording).
     ``moving``, ``wave_angle`` [rad] and ``eval_mask`` are per sample; ``fs`` in Hz.
     The scenario's known events (empty when it has none, or for a recording):
     ``steps`` rows ``(start, rise, change)`` [s, s, Nm] of the step loads' edges,
     ``chirps`` rows ``(start, stop, f0, f1)`` [s, s, Hz, Hz] of the chirp loads.
-    All fields but ``fs`` and the torques are arrays, so a case file stores them as such
-    (:data:`TRUTH_ARRAYS`).
+    ``torque_limit`` [Nm], recorded logs only: the largest torque the joint can carry; a row
+    whose estimate goes beyond it is not scored (:mod:`rippleb.scorable`).
+    What the method itself saw, for the truth-free columns (:mod:`rippleb.truthfree`):
+    ``strain`` [V] and ``encoder_angle`` [rad], the wave-generator angle from the encoder
+    counts (on a simulated log ``wave_angle`` is the true angle, not the encoder's); None
+    on a truth built without them.
+    All fields but ``fs``, ``torque_limit`` and the torques are arrays, so a case file stores
+    them as such (:data:`TRUTH_ARRAYS`).
     """
 
     fs: float
@@ -48,8 +58,12 @@ class Truth:
     wave_angle: np.ndarray
     torque_true: np.ndarray | None = None
     torque_ref: np.ndarray | None = None
+    torque_gear: np.ndarray | None = None
     steps: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     chirps: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    torque_limit: float | None = None
+    strain: np.ndarray | None = None
+    encoder_angle: np.ndarray | None = None
 
     def remembered(self, key, compute):
         """``compute()``, computed once per ``key`` while this truth lives.
@@ -70,10 +84,14 @@ class Truth:
     def from_simulation(cls, sim) -> "Truth":
         """From a simulator ``Simulation`` (its ``log``, ``moving``, ``wave_angle``, ``eval_mask``,
         and the step edges and chirps of its ``scenario``)."""
+        from rippleb.dsp import encoder_angle  # see from_recording
+
         log = sim.log
         truth = cls(fs=log.spec.fs, eval_mask=np.asarray(sim.eval_mask, bool),
                     moving=np.asarray(sim.moving, bool), wave_angle=np.asarray(sim.wave_angle, float),
-                    torque_true=log.torque_true, torque_ref=log.torque_ref)
+                    torque_true=log.torque_true, torque_ref=log.torque_ref,
+                    torque_gear=getattr(sim, "torque_gear", None), strain=log.strain,
+                    encoder_angle=encoder_angle(log.encoder, log.spec.counts_per_rev))
         sc = getattr(sim, "scenario", None)   # a stand-in simulation may have none: no events
         if sc is None:
             return truth
@@ -88,19 +106,21 @@ class Truth:
         the wave generator). A sample is *moving* when the encoder count changed within
         the last ``REST_HOLD_S`` = 10 ms, inclusive: at the paper's 2500 counts/rev this
         treats motor speeds below 2.4 rpm as rest. The whole log is the evaluation window.
+        ``torque_limit`` is :data:`~rippleb.data.MAX_TORQUE_FACTOR` times the rated torque.
         """
         # imported here: rippleb.dsp compiles the methods' numba kernels at import, which
         # the runner, and with it every CLI command, would otherwise pay for at start-up
         from rippleb.dsp import encoder_angle
 
+        angle = encoder_angle(log.encoder, log.spec.counts_per_rev)
         return cls(fs=log.spec.fs, eval_mask=np.ones(len(log), bool),
-                   moving=moving_from_encoder(log.encoder, log.spec.fs),
-                   wave_angle=encoder_angle(log.encoder, log.spec.counts_per_rev),
-                   torque_true=log.torque_true, torque_ref=log.torque_ref)
+                   moving=moving_from_encoder(log.encoder, log.spec.fs), wave_angle=angle,
+                   torque_true=log.torque_true, torque_ref=log.torque_ref, strain=log.strain,
+                   encoder_angle=angle, torque_limit=MAX_TORQUE_FACTOR * log.spec.rated_torque)
 
 
 #: The array fields of :class:`Truth` besides the torques: what a case file must store.
-TRUTH_ARRAYS = ("moving", "wave_angle", "eval_mask", "steps", "chirps")
+TRUTH_ARRAYS = ("moving", "wave_angle", "eval_mask", "steps", "chirps", "strain", "encoder_angle")
 
 
 def moving_from_encoder(encoder: np.ndarray, fs: float, hold_s: float = REST_HOLD_S) -> np.ndarray:
@@ -121,6 +141,23 @@ def rms_error(estimate: np.ndarray, truth: np.ndarray | None, mask: np.ndarray) 
         return float("nan")
     err = estimate[mask] - truth[mask]
     return float(np.sqrt(np.mean(err * err)))
+
+
+def gear_erased(estimate: np.ndarray, truth: np.ndarray | None, gear: np.ndarray | None,
+                mask: np.ndarray) -> float:
+    """The fraction of the gear's real torque ``g`` (``torque_gear``) the estimate removed:
+    ``-sum_W e g / sum_W g^2``, the least-squares share of ``-g`` in the error ``e``.
+
+    0: the estimate carries ``g`` as the joint does; 1: it erased it (its error is ``-g``);
+    it may leave [0, 1] (a method that doubles ``g``, or turns it around). NaN without a
+    gear torque (ideal gear, recording)."""
+    if truth is None or gear is None or not mask.any():
+        return float("nan")
+    g = gear[mask]
+    power = float(np.dot(g, g))
+    if not power > GEAR_TORQUE_FLOOR_NM ** 2 * len(g):
+        return float("nan")
+    return float(-np.dot(estimate[mask] - truth[mask], g) / power)
 
 
 def max_error(estimate: np.ndarray, truth: np.ndarray | None, mask: np.ndarray) -> float:
@@ -278,10 +315,21 @@ def score(estimate: np.ndarray, truth: Truth) -> dict[str, float]:
         "step_latency_ms": step_latency_ms(estimate, truth),
         "restart_max_error_nm": restart_max_error(estimate, best, truth),
         "stopped_rms_error_nm": rms_error(estimate, best, rest),
+        "gear_torque_rms_nm": rms_error(np.zeros_like(estimate), truth.torque_gear, mask),
+        "gear_erased_fraction": gear_erased(estimate, truth.torque_true, truth.torque_gear, mask),
+        "rms_error_without_gear_nm": rms_error(estimate, _without_gear(truth), mask),
     }
+
+
+def _without_gear(truth: Truth) -> np.ndarray | None:
+    """``torque_true - torque_gear``: the torque of the same joint with an ideal gear."""
+    if truth.torque_true is None or truth.torque_gear is None:
+        return None
+    return truth.remembered("without_gear", lambda: truth.torque_true - truth.torque_gear)
 
 
 METRIC_COLUMNS = ("rms_error_nm", "max_error_nm", "rms_error_ref_nm", "max_error_ref_nm",
                   "delay_ms", "bandwidth_hz", "step_latency_ms", "restart_max_error_nm",
-                  "stopped_rms_error_nm",
+                  "stopped_rms_error_nm", "gear_torque_rms_nm", "gear_erased_fraction",
+                  "rms_error_without_gear_nm",
                   "us_per_tick_p50", "us_per_tick_p99", "samples_per_s")

@@ -79,6 +79,11 @@ KNOBS = (
          "curvature of the ripple's load growth, rated torque / knee torque (0: affine)"),
     Knob("mismatch", "flank_asymmetry", "flank_asymmetry", float, 0.0, 1.0, 0.0, 0.2,
          "ripple change when the load changes tooth flank: log-amplitude and phase sigma (0: none)"),
+    Knob("mismatch", "extra_orders", "extra_orders", float, 0.0, 5.0, 0.0, 1.0,
+         "ripple at order 3 and at the wave-generator bearing's non-integer ball-pass order, "
+         "x the device's order-8 amplitude (0: none)"),
+    Knob("mismatch", "load_history", "load_history_nm", float, 0.0, 20.0, 0.0, 2.55,
+         "play width [Nm] of the load the ripple follows: loading and unloading differ (0: |tau| itself)"),
     Knob("thermal", "gain_coeff", "gain_temp_coeff", float, -0.005, 0.005, 0.0, 3.0e-4,
          "bridge span change per kelvin from 25 degC [1/K] (0: none)"),
     Knob("thermal", "warmup_rate", "warmup_k_per_min", float, 0.0, 20.0, 0.0, 1.0,
@@ -121,6 +126,8 @@ class Unmodelled:
     gauge_mode_hz: float | None = None
     load_saturation: float | None = None
     flank_asymmetry: float | None = None
+    extra_orders: float | None = None
+    load_history_nm: float | None = None
     gain_temp_coeff: float | None = None
     warmup_k_per_min: float | None = None
     adc_bits: int | None = None
@@ -151,7 +158,8 @@ class Unmodelled:
     @property
     def ripple_active(self) -> bool:
         """The wave-generator ripple departs from the device's affine Fourier map."""
-        return bool(self.gauge_mode_hz or self.load_saturation or self.flank_asymmetry)
+        return bool(self.gauge_mode_hz or self.load_saturation or self.flank_asymmetry
+                    or self.extra_orders or self.load_history_nm)
 
     @property
     def encoder_active(self) -> bool:

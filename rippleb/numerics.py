@@ -41,6 +41,16 @@ OPENBLAS_CORE = "Haswell"
 #: Set to 1 to leave numpy's and OpenBLAS's CPU dispatch as the libraries choose.
 NATIVE_SWITCH = "RIPPLEB_NATIVE_NUMERICS"
 PORTABLE = "portable"
+#: Set to ``avx2`` or ``avx512`` to make :func:`machine` describe a CPU of that kind in
+#: place of this one (the test suite's ``--fake-cpu``, docs/reproducibility.md): the
+#: numbers are still computed by this CPU, only what rippleb reads of it is faked.
+FAKE_CPU_SWITCH = "RIPPLEB_FAKE_CPU"
+#: The description each fake CPU gives: LLVM's SIMD features and numba's CPU name of a
+#: Haswell (AVX2 + FMA) and of a Skylake-X (AVX-512 F/CD/BW/DQ/VL).
+FAKE_CPUS = {
+    "avx2": ("avx avx2 fma", "haswell"),
+    "avx512": ("avx avx2 avx512bw avx512cd avx512dq avx512f avx512vl fma", "skylake-avx512"),
+}
 
 
 def pinned_environment(environ=None) -> dict[str, str]:
@@ -162,11 +172,39 @@ def machine() -> dict[str, str]:
     ``math.exp``...), and :func:`state`."""
     import platform
 
+    fake = fake_cpu()
+    simd, cpu = FAKE_CPUS[fake] if fake else _host_cpu()
+    described = {"cpu_simd": simd, "numba_cpu": cpu, "numpy_dispatch": " ".join(numpy_targets()),
+                 "openblas": " ".join(openblas_cores()), "libc": " ".join(platform.libc_ver()),
+                 "numerics": state()}
+    return {**described, "fake_cpu": fake} if fake else described
+
+
+def _host_cpu() -> tuple[str, str]:
+    """This CPU's AVX and FMA features as LLVM detects them, and the CPU numba compiles for."""
     import llvmlite.binding as llvm
     from numba.core import config
 
     features = llvm.get_host_cpu_features().flatten().split(",")
     simd = sorted(f[1:] for f in features if f.startswith("+") and f[1:].startswith(("avx", "fma")))
-    return {"cpu_simd": " ".join(simd), "numba_cpu": config.CPU_NAME or llvm.get_host_cpu_name(),
-            "numpy_dispatch": " ".join(numpy_targets()), "openblas": " ".join(openblas_cores()),
-            "libc": " ".join(platform.libc_ver()), "numerics": state()}
+    return " ".join(simd), config.CPU_NAME or llvm.get_host_cpu_name()
+
+
+def other_cpu_kind() -> str:
+    """The kind of :data:`FAKE_CPUS` this host is not: ``avx2`` on a CPU with AVX-512,
+    ``avx512`` on one without (the suite's ``--fake-cpu other``)."""
+    simd, _ = _host_cpu()
+    return "avx2" if "avx512f" in simd.split() else "avx512"
+
+
+def fake_cpu() -> str | None:
+    """The fake CPU :data:`FAKE_CPU_SWITCH` asks for (None: describe this one)."""
+    name = os.environ.get(FAKE_CPU_SWITCH, "").strip().lower()
+    if not name:
+        return None
+    if name not in FAKE_CPUS:
+        from rippleb.errors import InputError
+
+        raise InputError(f"{FAKE_CPU_SWITCH}={name!r} is not a CPU rippleb can fake; "
+                         f"use one of {', '.join(FAKE_CPUS)}")
+    return name

@@ -52,7 +52,8 @@ class Entry:
 
     ``origin`` is ``builtin`` or ``plugin``; ``source`` the module (built-in) or
     ``distribution: module:attr`` (plugin); ``error`` the import error of a broken entry;
-    ``doc`` the class docstring of a built-in, read from its source (no import needed).
+    ``doc`` the class docstring and ``description`` the ``description`` attribute of a
+    built-in, read from its source (no import needed).
     """
 
     name: str
@@ -61,6 +62,7 @@ class Entry:
     cls: type | None = None
     error: str | None = None
     doc: str | None = None
+    description: str = ""
     _entry_point: object = field(default=None, repr=False)
 
     @property
@@ -177,31 +179,39 @@ def _builtin_entries() -> tuple[dict[str, Entry], dict[str, str]]:
         except (OSError, SyntaxError, ValueError) as exc:
             broken[module_name] = one_line(exc)
             continue
-        for name, class_name, doc in found:
+        for name, class_name, doc, description in found:
             check_method_name(name, module_name)
             if name in entries:
                 raise PluginError(f"two methods are named {name!r}: "
                                   f"{entries[name].source} and {module_name}")
             point = importlib.metadata.EntryPoint(name, f"{module_name}:{class_name}", GROUP)
-            entries[name] = Entry(name, "builtin", module_name, doc=doc, _entry_point=point)
+            entries[name] = Entry(name, "builtin", module_name, doc=doc, description=description,
+                                  _entry_point=point)
     return entries, broken
 
 
-def _method_classes(path: str) -> list[tuple[str, str, str | None]]:
-    """``(method name, class name, class docstring)`` of every top-level class of the
-    module at ``path`` that sets ``name = "..."`` in its body."""
+def _method_classes(path: str) -> list[tuple[str, str, str | None, str]]:
+    """``(method name, class name, class docstring, description)`` of every top-level class
+    of the module at ``path`` that sets ``name = "..."`` in its body."""
     tree = ast.parse(Path(path).read_text(encoding="utf-8"), filename=path)
     found = []
     for node in tree.body:
-        if not isinstance(node, ast.ClassDef):
-            continue
-        for statement in node.body:
-            if (isinstance(statement, ast.Assign) and len(statement.targets) == 1
-                    and isinstance(statement.targets[0], ast.Name) and statement.targets[0].id == "name"
-                    and isinstance(statement.value, ast.Constant) and isinstance(statement.value.value, str)
-                    and statement.value.value):
-                found.append((statement.value.value, node.name, ast.get_docstring(node)))
+        if isinstance(node, ast.ClassDef):
+            strings = _class_strings(node)
+            if strings.get("name"):
+                found.append((strings["name"], node.name, ast.get_docstring(node), strings.get("description", "")))
     return found
+
+
+def _class_strings(node: ast.ClassDef) -> dict[str, str]:
+    """The class attributes of ``node`` set to a string literal: ``{"name": ..., ...}``."""
+    strings = {}
+    for statement in node.body:
+        if (isinstance(statement, ast.Assign) and len(statement.targets) == 1
+                and isinstance(statement.targets[0], ast.Name)
+                and isinstance(statement.value, ast.Constant) and isinstance(statement.value.value, str)):
+            strings[statement.targets[0].id] = statement.value.value
+    return strings
 
 
 #: A method name: letters, digits, '-' and '_', starting with a letter or '_' (a Python

@@ -26,13 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
-from rippleb.data import JointSpec
+from rippleb.data import MAX_TORQUE_FACTOR, JointSpec
 from rippleb.errors import InputError
 from rippleb.mismatch import TABLES as _UNMODELLED_TABLES, parse_tables
 from rippleb.profiles import DEFAULT_RISE, Load, Segment, evaluate_segments  # noqa: F401 (re-exported)
 from rippleb.scenario_types import (DEFAULT_JOINT, DEFAULT_ROBOT, DEFAULT_TEMPERATURE_C,  # noqa: F401 (re-exported)
                                     HYSTERESIS_NM, REFERENCE_TEMPERATURE_C, RIPPLE_TEMP_COEFF, Faults,
-                                    RippleSettings, Scenario)
+                                    TRANSMISSION_ERROR_PP, RippleSettings, Scenario)
 
 CALIBRATION = "calibration"
 SEGMENT_KINDS = ("hold", "move", "ramp", "cruise")
@@ -42,9 +42,13 @@ _NUMBER = (float, int)
 _TOP_KEYS = {"description": (str,), "scored": (bool,), "duration": _NUMBER,
              "temperature_c": _NUMBER, "evaluation": (dict,), "joint": (dict,),
              "robot": (dict,), "trajectory": (dict,), "load": (list,), "faults": (dict,),
-             "ripple": (dict,), **{table: (dict,) for table in _UNMODELLED_TABLES}}
+             "ripple": (dict,), "gear": (dict,), **{table: (dict,) for table in _UNMODELLED_TABLES}}
 _RIPPLE_KEYS = {"output_scale": _NUMBER, "hysteresis_nm": _NUMBER, "temperature_coeff": _NUMBER,
                 "drift": _NUMBER}
+_GEAR_KEYS = {"transmission_error": _NUMBER}
+#: Largest transmission-error class accepted [rad peak to peak]: 3.4 arcmin, above every
+#: class of the CSF catalogue (1 arcmin standard).
+MAX_TRANSMISSION_ERROR = 1e-3
 _EVAL_KEYS = {"start": _NUMBER, "stop": _NUMBER}
 _JOINT_KEYS = {f.name: ((int,) if f.type in ("int", int) else _NUMBER)
                for f in dataclasses.fields(JointSpec)}
@@ -73,8 +77,8 @@ _JOINT_MAX = {"fs": 1.0e6, "gear_ratio": 1000.0, "counts_per_rev": 2**24}
 #: Lubricant temperatures the friction model is meant for [deg C].
 TEMPERATURE_RANGE = (-40.0, 150.0)
 #: An external load above this many times the rated torque would break the drive
-#: (size-25 momentary peak ratings are 4-7 x rated).
-MAX_LOAD_FACTOR = 10.0
+#: (:data:`rippleb.data.MAX_TORQUE_FACTOR`).
+MAX_LOAD_FACTOR = MAX_TORQUE_FACTOR
 
 def _scenario_dir():
     return importlib.resources.files("rippleb.scenarios")
@@ -194,6 +198,11 @@ class Parser:
         for table, keys in _UNMODELLED_TABLES.items():
             self.table(top.get(table, {}), keys, table)
         unmodelled = parse_tables(top, self.fail, spec)
+        gear = self.table(top.get("gear", {}), _GEAR_KEYS, "gear")
+        transmission_error = float(gear.get("transmission_error", TRANSMISSION_ERROR_PP))
+        if not 0.0 <= transmission_error <= MAX_TRANSMISSION_ERROR:
+            self.fail("gear.transmission_error", f"must be in [0, {MAX_TRANSMISSION_ERROR:g}] rad peak to "
+                      f"peak, got {transmission_error:g}")
         return Scenario(name=self.name, path=self.path,
                         description=top.get("description", "").strip(),
                         spec=spec, duration=duration, scored=top.get("scored", True),
@@ -201,7 +210,7 @@ class Parser:
                         temperature_c=temperature,
                         robot=robot, joint=joint, posture=posture,
                         segments=segments, loads=loads, faults=faults, ripple=ripple,
-                        unmodelled=unmodelled)
+                        unmodelled=unmodelled, transmission_error=transmission_error)
 
     def spec(self, raw) -> JointSpec:
         values = self.table(raw, _JOINT_KEYS, "joint")

@@ -29,6 +29,11 @@ REFERENCE_TEMPERATURE_C = 25.0
 HYSTERESIS_NM = 0.5
 #: Relative change of every ripple amplitude per kelvin from 25 degC. Off: no source.
 RIPPLE_TEMP_COEFF = 0.0
+#: The drive's transmission-error class [rad, peak to peak over an output revolution]:
+#: the Harmonic Drive CSF catalogue's positioning accuracy of size 25, ratio >= 50, in
+#: the standard class (1 arcmin; the special class is 1.5e-4 rad). Scenario key
+#: ``[gear] transmission_error``; the physics is :mod:`rippleb.simulator.transmission`.
+TRANSMISSION_ERROR_PP = 2.9e-4
 
 
 @dataclass(frozen=True)
@@ -132,6 +137,9 @@ class Scenario:
         The physics beyond the methods' models that the scenario switches on
         (:class:`~rippleb.mismatch.Unmodelled`; tables ``[mismatch]``, ``[thermal]``,
         ``[daq]``, ``[encoder]``, ``[controller]``); none by default.
+    transmission_error
+        The drive's transmission-error class [rad peak to peak] (``[gear]
+        transmission_error``; :mod:`rippleb.simulator.transmission`), 0: an ideal gear.
     """
 
     name: str
@@ -150,6 +158,7 @@ class Scenario:
     faults: Faults = Faults()
     ripple: RippleSettings = RippleSettings()
     unmodelled: Unmodelled = Unmodelled()
+    transmission_error: float = TRANSMISSION_ERROR_PP
 
     def trajectory(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Commanded joint position, velocity, acceleration at times ``t``."""

@@ -2,11 +2,15 @@
 change; ``python -m pytest --full`` adds the tests marked ``slow`` (end-to-end runs,
 installs, the browser, property fuzzing) and is what CI runs (``.ci/run``)."""
 
+import os
+
 import pytest
 
 # Before any test module loads numpy: the portable numeric paths (rippleb/numerics.py),
 # without which the published rows re-run differently on an AVX-512 CPU.
 import rippleb  # noqa: F401
+from hypothesis import settings
+from rippleb.numerics import FAKE_CPU_SWITCH, FAKE_CPUS, other_cpu_kind
 
 #: Files that one xdist worker runs whole: their tests share a module fixture (one run of
 #: every case, one plugin install, one simulation) or a cache kept per process, which
@@ -23,9 +27,28 @@ ONE_WORKER_FILES = {
 }
 
 
+#: ``--timeout`` of the tests in which a method hangs on purpose. A healthy row of those
+#: tests (its simulation, fit and scoring) takes about 1 s on a quiet 2-core machine and
+#: was seen near 6 s, the limit these tests once had, with two full suites beside them:
+#: 60 s is ten times that, out of reach of a loaded host, and a hang still costs only the
+#: one job slot it holds (docs/reproducibility.md, "Tests and the host").
+HANG_TIMEOUT_S = 60
+
+# Hypothesis fails an example that takes over 200 ms by default: a wall-clock limit a
+# loaded 2-core machine reaches (a first example that loads a compiled kernel, two suites
+# side by side). The property tests check values, never speed: no deadline anywhere.
+settings.register_profile("rippleb", deadline=None)
+settings.load_profile("rippleb")
+
+
 def pytest_addoption(parser):
     parser.addoption("--full", action="store_true",
                      help="also run the tests marked slow (the full suite, as CI runs it)")
+    parser.addoption("--fake-cpu", choices=[*sorted(FAKE_CPUS), "other"],
+                     help="describe this host as a CPU of that kind (other: the kind it is not) to "
+                          "every test and the rippleb processes it starts (sets RIPPLEB_FAKE_CPU; "
+                          "docs/reproducibility.md, 'Tests and the host'); CI runs "
+                          "`python -m pytest -m host --fake-cpu other`")
 
 
 def pytest_configure(config):
@@ -34,6 +57,9 @@ def pytest_configure(config):
     every process that imports them would compile them itself (about 15 s each), and the
     slow tests that run first start many such processes at once. Later processes load
     them from numba's on-disk cache."""
+    fake = config.getoption("--fake-cpu")
+    if fake:   # rippleb processes the tests start inherit it
+        os.environ[FAKE_CPU_SWITCH] = other_cpu_kind() if fake == "other" else fake
     _check_numerics()
     if config.getoption("--full") and not hasattr(config, "workerinput"):
         from rippleb.engine.dask_worker import _load_modules  # what a Dask worker preloads
@@ -66,9 +92,13 @@ def pytest_collection_modifyitems(config, items):
 
 
 def pytest_report_header(config):
+    lines = []
+    fake = os.environ.get(FAKE_CPU_SWITCH)
+    if fake:
+        lines.append(f"{FAKE_CPU_SWITCH}={fake}: rippleb describes this host as a CPU of that kind")
     if not (config.getoption("--full") or config.option.markexpr):
-        return "fast default: tests marked slow are deselected; run with --full for the whole suite (CI)"
-    return None
+        lines.append("fast default: tests marked slow are deselected; run with --full for the whole suite (CI)")
+    return lines
 
 
 def lock_versions() -> dict[str, str]:

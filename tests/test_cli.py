@@ -35,8 +35,9 @@ def test_list_shows_methods_and_scenarios():
     assert proc.returncode == 0
     assert "raw" in proc.stdout and "builtin" in proc.stdout
     assert "paper-quintic" in proc.stdout and "calibration                  not scored" in proc.stdout
-    # one description per method (its docstring) and scenario (its TOML description)
-    assert "Order tracking with dead-zone switching and back" in proc.stdout
+    # one description per method (its `description`, tests/test_descriptions.py) and scenario
+    # (its TOML description)
+    assert "the paper: strain re-sampled at encoder positions" in proc.stdout
     assert "The paper's Fig. 4 experiment: one 5th-order polynomial" in proc.stdout
     assert "re-assembled" in proc.stdout
     assert max(len(line) for line in proc.stdout.splitlines()) <= 100

@@ -6,6 +6,7 @@ as much as it liked: 1.5 GiB under ``--memory-limit 200`` ended ``ok``, locally 
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import resource
@@ -42,11 +43,14 @@ LIFTER = textwrap.dedent('''
 ''')
 
 
-def _lift_and_allocate() -> bytes:
-    """A job: try to lift its own limit, then hold 1.5 GiB; report what happened."""
+def _lift_and_allocate(go: str) -> bytes:
+    """A job: once the file ``go`` exists, try to lift its own limit, then hold 1.5 GiB;
+    report what happened."""
     import numpy as np
 
-    time.sleep(1.0)  # long enough for the test to read the keeper's limits meanwhile
+    deadline = time.monotonic() + 300
+    while not os.path.exists(go) and time.monotonic() < deadline:
+        time.sleep(0.01)  # the test reads the keeper's limits meanwhile, however loaded the host
     soft, hard = resource.getrlimit(resource.RLIMIT_AS)
     for wanted in ((hard, hard), (resource.RLIM_INFINITY, resource.RLIM_INFINITY)):
         try:
@@ -68,15 +72,17 @@ def _address_space_limit(pid: int) -> str:
     return " ".join(line.split()[3:5])  # soft and hard, as the kernel prints them
 
 
-def test_the_memory_limit_binds_the_worker_and_nothing_else():
+def test_the_memory_limit_binds_the_worker_and_nothing_else(tmp_path):
     before = resource.getrlimit(resource.RLIMIT_AS)
     pool = Pool(1, memory_mb=200)
-    pool.submit("lifter", _lift_and_allocate, timeout=60)
+    go = tmp_path / "go"
+    pool.submit("lifter", functools.partial(_lift_and_allocate, str(go)), timeout=600)
     run = pool._running[0]
     while run.worker is None:  # the keeper names its worker once it has forked it
         pool._collect()
         time.sleep(0.01)
     keeper_limits = _address_space_limit(run.keeper)   # the worker reports its own below
+    go.touch()
     finished = []
     while not finished:
         finished = pool.wait()

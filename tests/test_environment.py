@@ -2,6 +2,7 @@
 (docs/reproducibility.md, "Provenance")."""
 
 import json
+import os
 
 import pandas as pd
 import pytest
@@ -9,7 +10,11 @@ import pytest
 from rippleb import numerics
 from rippleb.cli import main
 from rippleb.report.provenance import (NUMBER_PRODUCERS, collect_provenance, environment, environment_changes,
-                                environment_sentence, environment_warnings)
+                                environment_sentence, environment_warnings, machine_rows)
+
+#: Every test here reads what rippleb records of the host: CI runs them once more with
+#: the description of the other kind of CPU (``-m host --fake-cpu``, tests/conftest.py).
+pytestmark = pytest.mark.host
 
 
 def test_provenance_names_every_package_that_computes_a_number_and_the_numeric_paths():
@@ -25,11 +30,28 @@ def test_changes_name_each_version_and_machine_entry_that_differs():
     here = environment()
     other = json.loads(json.dumps(here))
     other["versions"]["numpy"] = "1.26.4"
-    other["machine"]["cpu_simd"] = "avx avx2 fma"
+    # the other machine is derived from this one, so it differs on any host: without
+    # AVX-512 where this one has it, with it where this one has not
+    simd = here["machine"]["cpu_simd"]
+    other["machine"]["cpu_simd"] = other_cpu_simd(simd)
+    assert other["machine"]["cpu_simd"] != simd
     assert environment_changes(here, here) == []
     assert environment_changes(here, other) == [
         f"numpy: {here['versions']['numpy']} -> 1.26.4",
-        f"cpu_simd: {here['machine']['cpu_simd']} -> avx avx2 fma"]
+        f"cpu_simd: {simd} -> {other['machine']['cpu_simd']}"]
+
+
+def other_cpu_simd(simd: str) -> str:
+    """A SIMD feature list that is never ``simd``: AVX-512 taken away or added."""
+    features = simd.split()
+    if any(f.startswith("avx512") for f in features):
+        return " ".join(f for f in features if not f.startswith("avx512"))
+    return " ".join(sorted(features + ["avx512f"]))
+
+
+@pytest.mark.parametrize("simd", ["avx avx2 fma", "avx avx2 avx512bw avx512f fma", ""])
+def test_the_derived_other_machine_differs_from_either_kind_of_host(simd):
+    assert other_cpu_simd(simd) != simd
 
 
 def _rows(**columns) -> pd.DataFrame:
@@ -79,3 +101,13 @@ def test_resume_on_another_environment_warns_records_and_reports(tmp_path, capsy
 
     assert main(["report", str(run_dir), "--no-figures"]) == 0
     assert "the run was resumed on another environment (numpy: 1.26.4" in capsys.readouterr().err
+
+
+def test_the_report_names_the_cpu_features_and_says_when_they_are_faked():
+    run = collect_provenance(["run"])
+    rows = {name: value for name, value in machine_rows(run)}
+    assert rows["CPU SIMD features (LLVM)"] == run["machine"]["cpu_simd"]
+    faked = os.environ.get(numerics.FAKE_CPU_SWITCH)
+    assert ("CPU description faked" in rows) == bool(faked)
+    if faked:
+        assert f"RIPPLEB_FAKE_CPU={faked}" in rows["CPU description faked"]

@@ -51,7 +51,7 @@ def test_page_is_self_contained_with_tables_per_condition_and_headline(tmp_path)
     assert page.count("Plotly.newPlot") == 2  # rows and cost; no signals without a figure seed
     assert "All metrics under <code>same-session</code>" in page
     assert "All metrics under <code>re-assembled</code>" in page
-    assert "The leader depends on the condition" in page
+    assert "The lowest mean depends on the condition" in page
     assert page.count('class="sortable"') == 4  # summary, two conditions, provenance
     assert "report of <code>runs/x</code>" in page
 

@@ -12,6 +12,7 @@ import sys
 import pytest
 
 from rippleb import numerics
+from rippleb.errors import InputError
 from rippleb.report.tables import ACCURACY_COLUMNS
 
 #: Variables a case may set; removed from the parent's environment first, so each case
@@ -59,11 +60,30 @@ def test_the_native_switch_leaves_the_libraries_alone():
     assert out.strip() == "None"
 
 
+@pytest.mark.host
 def test_machine_names_what_decides_the_last_bits():
     machine = numerics.machine()
-    assert set(machine) == {"cpu_simd", "numba_cpu", "numpy_dispatch", "openblas", "libc", "numerics"}
+    described = {"cpu_simd", "numba_cpu", "numpy_dispatch", "openblas", "libc", "numerics"}
+    fake = os.environ.get(numerics.FAKE_CPU_SWITCH)
+    assert set(machine) == (described | {"fake_cpu"} if fake else described)
     assert "avx2" in machine["cpu_simd"].split()  # every machine of this kind
     assert machine["numerics"] == numerics.PORTABLE  # the suite runs them (tests/conftest.py)
+
+
+@pytest.mark.parametrize("kind", sorted(numerics.FAKE_CPUS))
+def test_a_fake_cpu_is_described_in_place_of_the_host(monkeypatch, kind):
+    monkeypatch.setenv(numerics.FAKE_CPU_SWITCH, kind)
+    machine = numerics.machine()
+    assert machine["fake_cpu"] == kind
+    assert ("avx512f" in machine["cpu_simd"].split()) == (kind == "avx512")
+    assert "avx2" in machine["cpu_simd"].split() and "fma" in machine["cpu_simd"].split()
+    assert machine["numerics"] == numerics.PORTABLE   # the numbers' paths are the host's own
+
+
+def test_an_unknown_fake_cpu_is_one_line_naming_the_variable(monkeypatch):
+    monkeypatch.setenv(numerics.FAKE_CPU_SWITCH, "avx10")
+    with pytest.raises(InputError, match=r"RIPPLEB_FAKE_CPU='avx10' is not a CPU .*avx2, avx512"):
+        numerics.machine()
 
 
 ROW = """
@@ -125,3 +145,14 @@ def test_a_run_on_native_paths_warns_and_says_so_in_its_rows(tmp_path):
     import pandas as pd
 
     assert pd.read_csv(tmp_path / "run" / "results.csv")["numerics"].str.startswith("native").all()
+
+
+def test_the_other_kind_of_cpu_is_never_this_hosts(monkeypatch):
+    simd, _ = numerics._host_cpu()
+    other = numerics.other_cpu_kind()
+    assert other in numerics.FAKE_CPUS
+    assert ("avx512f" in numerics.FAKE_CPUS[other][0].split()) != ("avx512f" in simd.split())
+    monkeypatch.setattr(numerics, "_host_cpu", lambda: ("avx avx2 fma", "haswell"))
+    assert numerics.other_cpu_kind() == "avx512"
+    monkeypatch.setattr(numerics, "_host_cpu", lambda: (numerics.FAKE_CPUS["avx512"][0], "x"))
+    assert numerics.other_cpu_kind() == "avx2"

@@ -306,8 +306,14 @@ def test_stop_restart_back_propagation_lowers_the_restart_error():
 
 
 def test_stop_restart_dead_zone_lowers_the_error_at_rest():
-    assert (_mean(OrderTracking, "stop-restart", "stopped_rms_error_nm")
-            < _mean(OrderTrackingNoDeadzone, "stop-restart", "stopped_rms_error_nm"))
+    """Paired per device, over the 5 seeds of docs/methods/order-tracking.md: with the
+    gear's transmission error the link rings differently into each stop, and on one
+    device in eight (seed 1) holding the last filtered value happens to land closer; the
+    dead zone wins on the others and on the mean."""
+    seeds = range(5)
+    ours = np.array([_scores(OrderTracking, "stop-restart", s)["stopped_rms_error_nm"] for s in seeds])
+    held = np.array([_scores(OrderTrackingNoDeadzone, "stop-restart", s)["stopped_rms_error_nm"] for s in seeds])
+    assert np.sum(ours < held) >= 4 and ours.mean() < held.mean(), (ours, held)
 
 
 CONSTANT_SPEED = """

@@ -1,7 +1,7 @@
 """Third-party plugins, pip-installed from packages built in a temporary directory."""
 
 import os
-import re
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -9,8 +9,10 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from conftest import HANG_TIMEOUT_S
 
 ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "examples" / "rippleb-median"
 pytestmark = pytest.mark.slow
 
 MISBEHAVING = '''
@@ -46,14 +48,6 @@ class Chatty(Method):
 '''
 
 
-def readme_blocks():
-    """The plugin exactly as printed in the README: (pyproject.toml, module source)."""
-    text = (ROOT / "README.md").read_text()
-    toml = re.search(r"`rippleb-median/pyproject.toml`:\n\n```toml\n(.*?)```", text, re.S).group(1)
-    module = re.search(r"`rippleb-median/rippleb_median.py`:\n\n```python\n(.*?)```", text, re.S).group(1)
-    return toml, module
-
-
 def _package(root, name, module, source, entry_points):
     root.mkdir()
     eps = "\n".join(f'{k} = "{module}:{v}"' for k, v in entry_points.items())
@@ -73,13 +67,12 @@ def _package(root, name, module, source, entry_points):
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory):
-    """A --target directory with the README plugin and a package of misbehaving plugins."""
+    """A --target directory with the README plugin (as shipped in examples/rippleb-median/,
+    which tests/test_plugin_example.py keeps equal to the README) and a package of
+    misbehaving plugins."""
     tmp = tmp_path_factory.mktemp("plugins")
-    toml, module = readme_blocks()
     readme_pkg = tmp / "rippleb-median"
-    readme_pkg.mkdir()
-    (readme_pkg / "pyproject.toml").write_text(toml)
-    (readme_pkg / "rippleb_median.py").write_text(module)
+    shutil.copytree(EXAMPLE, readme_pkg, ignore=shutil.ignore_patterns("__pycache__", ".*"))
     _package(tmp / "bad", "rippleb-bad", "rippleb_bad", MISBEHAVING,
              {"raises": "Raises", "nans": "Nans", "short": "Short", "sleeps": "Sleeps", "chatty": "Chatty"})
     _package(tmp / "broken", "rippleb-broken", "rippleb_broken", "import no_such_module\n",
@@ -103,7 +96,9 @@ def test_installed_plugins_are_listed_with_their_origin(site):
     proc = rippleb(site, "list")
     assert proc.returncode == 0, proc.stderr
     lines = {line.split()[0]: line for line in proc.stdout.splitlines() if line.startswith("  ")}
-    assert "plugin" in lines["median"] and "rippleb-median" in lines["median"]
+    assert "plugin" in lines["median"]
+    # no description, no class docstring: its module's docstring says what it is
+    assert "A running median of the calibrated strain" in lines["median"]
     assert "broken" in lines["broken-one"] and "No module named 'no_such_module'" in lines["broken-one"]
     assert "builtin" in lines["raw"]
 
@@ -111,7 +106,7 @@ def test_installed_plugins_are_listed_with_their_origin(site):
 def test_misbehaving_plugins_get_their_status_and_the_others_complete(site, tmp_path):
     out = tmp_path / "run"
     proc = rippleb(site, "run", "--methods", "median,raises,nans,short,sleeps,chatty,broken-one,raw",
-                   "--scenarios", "static-contact", "--seeds", "1", "--jobs", "2", "--timeout", "6",
+                   "--scenarios", "static-contact", "--seeds", "1", "--jobs", "2", "--timeout", HANG_TIMEOUT_S,
                    "--out", out, "--no-progress")
     # the broken plugin's row is kept and the others ran, but the run says so and exits 1
     assert proc.returncode == 1, proc.stderr
@@ -143,3 +138,39 @@ def test_a_plugin_named_like_a_builtin_is_a_clear_error(tmp_path):
     assert proc.returncode == 2
     assert proc.stderr.startswith("rippleb: error: two methods are named 'raw'")
     assert "rippleb-clash" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_the_example_plugins_own_tests_pass(site, tmp_path):
+    """As its author runs them: pytest in the plugin's directory, the plugin installed."""
+    package = tmp_path / "rippleb-median"
+    shutil.copytree(EXAMPLE, package, ignore=shutil.ignore_patterns("__pycache__", ".*"))
+    env = {**os.environ, "PYTHONPATH": str(site)}
+    proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "no:randomly",
+                           "tests"], capture_output=True, text=True, env=env, cwd=package, timeout=1800)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "2 passed" in proc.stdout
+
+
+def test_rippleb_check_passes_the_readme_plugin_and_fails_a_misbehaving_one(site):
+    good = rippleb(site, "check", "median[window=5]")
+    assert good.returncode == 0, good.stdout + good.stderr
+    assert good.stdout.splitlines()[-1] == "median[window=5]: 9 of 9 checks passed"
+    bad = rippleb(site, "check", "short")
+    assert bad.returncode == 1, bad.stdout + bad.stderr
+    assert "  FAIL  output" in bad.stdout and "  skip  causality" in bad.stdout
+
+
+def test_variants_of_a_plugin_run_with_their_parameters_checked_in_a_child(site, tmp_path):
+    refused = rippleb(site, "run", "--methods", "median[size=3]", "--scenarios", "static-contact",
+                      "--seeds", "1", "--out", tmp_path / "refused", "--no-progress")
+    assert refused.returncode == 2
+    lines = refused.stderr.strip().splitlines()
+    assert len(lines) == 1 and "method 'median': unknown parameter 'size'" in lines[0], refused.stderr
+    out = tmp_path / "run"
+    proc = rippleb(site, "run", "--methods", "median[window=50,200]", "--scenarios", "static-contact",
+                   "--seeds", "1", "--out", out, "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    rows = pd.read_csv(out / "results.csv").set_index("method")
+    assert rows.status.to_dict() == {"median[window=50]": "ok", "median[window=200]": "ok"}
+    assert rows["params"].to_dict() == {"median[window=50]": '{"window": 50}',
+                                        "median[window=200]": '{"window": 200}'}

@@ -9,7 +9,8 @@ from rippleb import registry as reg
 from rippleb.registry import Registry
 
 BUILTINS = ["raw", "lowpass", "order-tracking", "order-tracking-no-deadzone",
-            "order-tracking-no-backprop", "switched-notch", "kalman-ripple", "current-based"]
+            "order-tracking-no-backprop", "switched-notch", "kalman-ripple", "current-based",
+            "spatial-filter", "fourier-lms", "periodic-dob"]
 
 
 @pytest.fixture

@@ -75,15 +75,41 @@ def test_equal_values_show_no_spread():
 
 
 def test_ranking_says_whether_the_lead_is_resolved():
-    rows = [{"method": m, "scenario": "creep", "seed": k, "rms_error_nm": base + 0.01 * k}
-            for m, base in (("kalman-ripple", 0.1), ("raw", 1.0), ("lowpass", 1.005)) for k in range(5)]
+    # lowpass is raw plus +0.02 / -0.015 on alternate devices: a mean lead of 0.006 whose
+    # paired interval includes 0
+    rows = [{"method": m, "scenario": "creep", "seed": k,
+             "rms_error_nm": base + 0.01 * k + (wobble if k % 2 == 0 else -0.75 * wobble)}
+            for m, base, wobble in (("kalman-ripple", 0.1, 0.0), ("raw", 1.0, 0.0), ("lowpass", 1.0, 0.02))
+            for k in range(5)]
     ranked = report.ranking(_frame(rows))
     assert list(ranked["method"]) == ["kalman-ripple", "raw", "lowpass"]
-    assert "do not overlap" in report.ranking_markdown(_frame(rows))
+    assert "kalman-ripple leads raw by 0.9 ± 0 Nm lower on 5/5 devices (paired, 95 % interval)" \
+        in report.ranking_markdown(_frame(rows))
     assert report.headline_sentences(_frame(rows)) == [
         "`kalman-ripple` has the lowest mean `rms_error_nm` on 1 of 1 scenarios (creep)."]
     close = [r for r in rows if r["method"] != "kalman-ripple"]
-    assert "not separated" in report.ranking_markdown(_frame(close))
+    text = report.ranking_markdown(_frame(close))
+    assert "raw and lowpass are not separated" in text and "on 3/5 devices" in text
+
+
+def test_a_paired_lead_is_found_where_the_devices_spread_hides_it():
+    """Devices differ far more than the methods do: the two 95 % intervals overlap, yet
+    one method is lower on every device by 0.05 +- 0.01 Nm (the issue's point)."""
+    import pandas as pd
+
+    from rippleb.report.paired import paired_lead
+
+    device = pd.Series([0.3, 0.9, 0.5, 1.4, 0.7, 1.1, 0.4, 0.8])
+    better = device
+    worse = device + 0.05 + 0.01 * np.array([1, -1, 0, 1, -1, 0, 1, -1])
+    first, second = report.t_interval(better), report.t_interval(worse)
+    assert first[0] + first[1] > second[0] - second[1]            # the unpaired intervals overlap
+    lead = paired_lead(better, worse)
+    assert lead.verdict == "separated" and lead.wins == 8 and lead.mean == pytest.approx(0.05)
+    # five claims: each interval at 99 %, wider than at 95 %
+    assert paired_lead(better, worse, claims=5).half > lead.half
+    assert "99 % interval for 5 claims" in paired_lead(better, worse, claims=5).describe()
+    assert paired_lead(better, worse.iloc[:1]).verdict == "unknown"   # one shared device
 
 
 # --------------------------------------------------------------------------- Table I
@@ -315,9 +341,10 @@ def test_condition_summary_is_the_mean_over_scenarios_then_over_seeds():
 def test_headline_says_who_leads_under_which_condition():
     lines = tables.condition_headline(_frame(_conditions_rows()))
     assert lines[0].startswith("Under `same-session`, `kalman-ripple` has the lowest mean")
-    assert "ahead of `order-tracking`" in lines[0] and "do not overlap" in lines[0]
+    assert "ahead of `order-tracking`" in lines[0]
+    assert "it leads by 0.3 ± 0 Nm lower on 4/4 devices (paired, 97.5 % interval for 2 claims)" in lines[0]
     assert lines[1].startswith("Under `re-assembled`, `order-tracking` has the lowest mean")
-    assert lines[2] == ("The leader depends on the condition: `kalman-ripple` under `same-session`, "
+    assert lines[2] == ("The lowest mean depends on the condition: `kalman-ripple` under `same-session`, "
                         "`order-tracking` under `re-assembled`.")
 
 

@@ -6,6 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import HANG_TIMEOUT_S
 
 import rippleb
 from rippleb import InputError, JointSpec, Method, make_log
@@ -135,7 +136,7 @@ def test_misbehaving_methods_get_their_status_and_the_others_complete(fake, tmp_
     names = [c.name for c in ALL] + ["raw"]
     # the sleeper's rows cost the timeout; every other row takes about a second at most
     frame = rippleb.run(methods=names, scenarios=["paper-quintic"], seeds=2, jobs=3, out=tmp_path,
-                        timeout=6, memory_mb=1000)
+                        timeout=HANG_TIMEOUT_S, memory_mb=1000)
     status = {(r.method, r.seed): r.status for r in frame.itertuples()}
     expected = {"perfect": "ok", "raises": "error", "nans": "invalid", "short": "invalid",
                 "strings": "invalid", "sleeps": "timeout", "hog": "error", "chatty": "ok",

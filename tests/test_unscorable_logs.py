@@ -123,6 +123,8 @@ def test_scores_that_overflow_are_invalid_not_ok(tmp_path, monkeypatch, capsys):
     frame = _frame()
     frame.assign(strain=frame.strain * 1e306).to_csv(tmp_path / "rec.csv", index=False)
     _frame(int(1.2 * FS)).to_csv(tmp_path / "cal.csv", index=False)
+    # a rated torque so large that the scale rule (rippleb.scorable) lets every estimate through
+    (tmp_path / "rec.toml").write_text("[joint]\nrated_torque = 1e308\n")
     code, err = _run(tmp_path, monkeypatch, capsys, "--log", "rec.csv", "--calibration", "cal.csv")
     assert code == 0, err
     assert "overflow" not in err   # the overflow is the row's status, not a numpy warning
@@ -130,6 +132,17 @@ def test_scores_that_overflow_are_invalid_not_ok(tmp_path, monkeypatch, capsys):
     assert (rows.status == "invalid").all(), rows[["method", "status", "message"]]
     assert rows.message.str.startswith("its scores are not finite (rms_error_ref_nm = inf").all()
     assert rows.rms_error_ref_nm.isna().all()
+
+
+def test_with_the_joints_rated_torque_the_scale_rule_says_it_first(tmp_path, monkeypatch, capsys):
+    frame = _frame()
+    frame.assign(strain=frame.strain * 1e306).to_csv(tmp_path / "rec.csv", index=False)
+    _frame(int(1.2 * FS)).to_csv(tmp_path / "cal.csv", index=False)
+    code, err = _run(tmp_path, monkeypatch, capsys, "--log", "rec.csv", "--calibration", "cal.csv")
+    assert code == 0 and "overflow" not in err, err
+    rows = pd.read_csv(tmp_path / "out" / "results.csv")
+    assert (rows.status == "invalid").all() and rows.rms_error_ref_nm.isna().all()
+    assert rows.message.str.startswith("its estimate reaches 7e+306 Nm, beyond 510 Nm").all(), rows.message
 
 
 def test_a_boolean_index_pulse_is_a_pulse(tmp_path):

@@ -23,12 +23,12 @@ FRAME = _frame({("angle-adaptive", "same-session"): 0.4, ("angle-adaptive", "rea
 
 def test_verdicts_say_where_each_method_wins_breaks_and_what_the_mismatch_costs():
     lines = {line.split("`")[1]: line for line in method_verdicts(FRAME)}
-    assert lines["angle-adaptive"].startswith("`angle-adaptive`: leads under `same-session`; best under "
+    assert lines["angle-adaptive"].startswith("`angle-adaptive`: lowest mean under `same-session`; best under "
                                               "`same-session`")
     assert "worst under `realistic`" in lines["angle-adaptive"]
     assert "changes its error by +0.2 Nm (+49%)" in lines["angle-adaptive"]
     assert lines["angle-adaptive"].endswith(f"Why: {MECHANISMS['angle-adaptive']}.")
-    assert "leads under `realistic`" in lines["my-plugin"] and "-0.4 Nm (-44%)" in lines["my-plugin"]
+    assert "lowest mean under `realistic`" in lines["my-plugin"] and "-0.4 Nm (-44%)" in lines["my-plugin"]
     assert "Why" not in lines["my-plugin"]  # a plugin's mechanism is not rippleb's to state
     assert "rank 3 of 3" in lines["raw"]
 
@@ -46,3 +46,12 @@ def test_the_worst_case_column_names_its_condition():
     assert row.rstrip(" |").endswith("(realistic)")
     one = condition_summary_markdown(FRAME[FRAME["condition"] == "same-session"])
     assert "worst case" not in one  # one condition: nothing to take the worst of
+
+
+def test_a_run_of_one_condition_says_where_each_method_ranks_and_why():
+    one = FRAME[FRAME["condition"] == "same-session"]
+    lines = {line.split("`")[1]: line for line in method_verdicts(one)}
+    assert lines["angle-adaptive"].startswith("`angle-adaptive`: lowest mean under `same-session`; rank 1 of 3 "
+                                              "under `same-session`")
+    assert "rank 3 of 3 under `same-session`" in lines["raw"] and "worst under" not in lines["raw"]
+    assert lines["raw"].endswith(f"Why: {MECHANISMS['raw']}.")

@@ -6,11 +6,10 @@ Plugins are imported only in isolated children (:func:`probe_plugins`), each und
 
 from __future__ import annotations
 
-import os
-
 from rippleb.cli.options import limit
 from rippleb.errors import RipplebError
 from rippleb.printable import escaped
+from rippleb.method import first_line
 
 PLUGIN_IMPORT_TIMEOUT_S = 20.0
 
@@ -18,8 +17,8 @@ PLUGIN_IMPORT_TIMEOUT_S = 20.0
 def add_list(sub) -> None:
     p = sub.add_parser("list", help="list methods, scenarios and deployment conditions, one line each",
                        description="List every method with its origin (builtin, plugin, or broken "
-                                   "with its import error) and what it does (the first line of its "
-                                   "docstring), every built-in scenario with whether it is scored and "
+                                   "with its import error) and what it does (its description, else "
+                                   "the first line of its class or module docstring), every built-in scenario with whether it is scored and "
                                    "what it tests (the first sentence of its description), and the "
                                    "deployment conditions. Plugins are imported in a child "
                                    "process, each under a timeout.")
@@ -50,7 +49,8 @@ def cmd_list(args) -> int:
             continue
         # a built-in's docstring is read from its source: importing every method family
         # (numba kernels compiled on a fresh install) would make `list` take seconds
-        about = first_line(entry.doc) if entry.origin == "builtin" else docs.get(name, "")
+        about = (entry.description or first_line(entry.doc)) if entry.origin == "builtin" \
+            else docs.get(name, "")
         print(_fit(f"  {name:<28} {entry.origin:<10} {escaped(about or entry.source)}"))
     for module, error in sorted(registry.broken_modules.items()):
         print(f"  {'?':<28} {'broken':<8} {module}  {escaped(error)}")
@@ -67,12 +67,6 @@ def cmd_list(args) -> int:
     for name, text in CONDITIONS.items():
         print(_fit(f"  {name:<28} {'':<10} {text}"))
     return 0
-
-
-def first_line(doc: str | None) -> str:
-    """The first non-empty line of a docstring, without reST markup."""
-    lines = [line.strip() for line in (doc or "").strip().splitlines() if line.strip()]
-    return lines[0].replace("``", "") if lines else ""
 
 
 #: Words ending in a full stop that do not end a sentence.
@@ -102,33 +96,12 @@ def _fit(line: str) -> str:
 
 def probe_plugins(registry, timeout: float) -> tuple[dict[str, str], dict[str, str]]:
     """Import every plugin in its own isolated child, under ``timeout`` seconds each;
-    return ``{name: one-line error}`` of those that failed and ``{name: first docstring
-    line}`` of those that loaded. The parent never runs plugin code, so a plugin that
-    hangs or exits at import delays only itself."""
-    from rippleb.errors import PluginError
-    from rippleb.engine.isolation import Confinement
-    from rippleb.engine.pool import Pool
-
-    def job(entry):
-        def load():
-            return first_line(entry.load().__doc__).encode()
-        return load
+    return ``{name: one-line error}`` of those that failed and ``{name: summary}``
+    (:meth:`rippleb.Method.summary`) of those that loaded."""
+    from rippleb.engine.methods import probe
 
     plugins = [name for name in registry.names("plugin") if not registry.entries[name].broken]
-    pool, errors, docs = Pool(max(1, min(len(plugins), os.cpu_count() or 1))), {}, {}
-    pending = list(plugins)
-    while pending or pool.busy:
-        while pending and pool.free:
-            name = pending.pop(0)
-            pool.submit(name, job(registry.entries[name]), timeout, confine=Confinement())
-        for fin in pool.wait():
-            if fin.kind == "done":
-                docs[fin.key] = bytes(fin.value).decode(errors="replace")
-            elif fin.kind == "raised":
-                errors[fin.key] = fin.value.split("is broken: ", 1)[-1] if PluginError.__name__ in fin.value \
-                    else fin.value
-            elif fin.kind == "timeout":
-                errors[fin.key] = f"TimeoutError: import took longer than {timeout:g} s (--import-timeout)"
-            elif fin.kind != "done":
-                errors[fin.key] = f"import ended the process (exit code {fin.value})"
-    return errors, docs
+    summaries, errors = probe(registry, plugins, lambda entry: entry.load().summary().encode(), timeout)
+    errors = {name: error + " (--import-timeout)" if error.startswith("TimeoutError") else error
+              for name, error in errors.items()}
+    return errors, {name: text.decode(errors="replace") for name, text in summaries.items()}

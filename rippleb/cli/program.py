@@ -1,4 +1,4 @@
-"""The ``rippleb`` command: ``list``, ``run``, ``sweep``, ``simulate``, ``report``.
+"""The ``rippleb`` command: ``list``, ``run``, ``sweep``, ``simulate``, ``report``, ``check``.
 
 Built on argparse (standard library, no extra dependency; subcommands and ``--help``
 are all this CLI needs). Every :class:`~rippleb.errors.RipplebError` becomes one line
@@ -7,7 +7,7 @@ are all this CLI needs). Every :class:`~rippleb.errors.RipplebError` becomes one
 finished rows are.
 
 This module is the program (:func:`entry`, :func:`main`, the parser); each subcommand is
-a module of :mod:`rippleb.cli` (``run``, ``sweep``, ``simulate``, ``report``, ``list``),
+a module of :mod:`rippleb.cli` (``run``, ``sweep``, ``simulate``, ``report``, ``list``, ``check``),
 and the options they share are in :mod:`rippleb.cli.options`.
 """
 
@@ -21,6 +21,7 @@ import sys
 import warnings
 from pathlib import Path
 
+from rippleb.cli.check import add_check
 from rippleb.cli.list import add_list
 from rippleb.cli.report import add_report
 from rippleb.cli.run import add_run
@@ -132,7 +133,7 @@ def _warnings_as_lines():
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with its four subcommands."""
+    """The argument parser with its subcommands."""
     parser = argparse.ArgumentParser(
         prog="rippleb", epilog=EPILOG,
         description="Benchmark of torque-ripple cancellation methods for strain-gauge joint "
@@ -145,4 +146,5 @@ def build_parser() -> argparse.ArgumentParser:
     add_sweep(sub)
     add_simulate(sub)
     add_report(sub)
+    add_check(sub)
     return parser

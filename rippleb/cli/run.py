@@ -27,7 +27,8 @@ def add_run(sub) -> None:
                     "finishes. Defaults: every built-in method, every scored built-in scenario, "
                     f"{DEFAULT_SEEDS} seeds, out runs/<timestamp>/.")
     p.add_argument("--methods", help="comma-separated method names, or 'all' to add plugins "
-                                     "(default: every built-in method)")
+                                     "(default: every built-in method); 'NAME[p=1,2]' runs one variant "
+                                     "per value of a constructor parameter (docs/plugins.md)")
     p.add_argument("--scenarios", help="comma-separated scenario names or paths to .toml files "
                                        "(default: every scored built-in scenario)")
     p.add_argument("--conditions", metavar="A,B|all",
@@ -52,6 +53,14 @@ def add_run(sub) -> None:
                    help="with --log: the calibration log (needs torque_ref); default: the log itself, "
                         "with a warning: a scored log is not a calibration recording, and fits some "
                         "methods worse or not at all")
+    p.add_argument("--joint", type=Path, metavar="FILE",
+                   help="with --log: the joint.toml describing the joint (counts per revolution, gear "
+                        "ratio, rated torque, ...) and the logs' column names and units; a log's sidecar "
+                        "(rec.toml beside rec.csv) overrides it; what neither gives is assumed and "
+                        "printed before the run (docs/your-joint.md)")
+    p.add_argument("--resample", action="store_true",
+                   help="with --log: put logs whose time stamps jitter on a uniform grid at their mean "
+                        "rate (linear interpolation; encoder counts held) instead of refusing them")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_executor_options(p)
     add_seal_options(p)
@@ -141,9 +150,14 @@ def _run(args, start: float) -> int:
         _refuse_with_log(args)
         executor(args)  # refuses dask with --log
         args.out_dir = args.out or runner.default_out_dir()
-        frame = runner.run_log(args.log, args.calibration, args.methods, jobs=args.jobs,
+        log, cal = read_logs(args)
+
+        def started_on_logs():  # the logs passed every check: say how they were read, then run
+            print(joint_block(args, log, cal), file=sys.stderr)
+            started()
+        frame = runner.run_log(log, cal, args.methods, jobs=args.jobs,
                                out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress,
-                               on_start=started)
+                               on_start=started_on_logs)
         if args.calibration is None:
             print("rippleb: warning: no --calibration: each method was fitted on the scored log "
                   "itself, not on a calibration recording; a log without motion both ways, a range "
@@ -151,6 +165,7 @@ def _run(args, start: float) -> int:
                   "would, or not at all, so these rows are no fair comparison; pass --calibration "
                   "FILE, e.g. one written by 'rippleb simulate calibration'", file=sys.stderr)
     elif args.resume is not None:
+        _refuse_without_log(args)
         config = runner.read_config(args.resume)
         args.out_dir = args.resume
         _warn_other_environment(args.resume)
@@ -162,17 +177,16 @@ def _run(args, start: float) -> int:
                            timeout=timeout, memory_mb=memory, resume=True, progress=progress,
                            on_start=started, executor=executor(args), salt_file=args.salt_file)
     else:
-        if args.calibration is not None:
-            raise InputError("--calibration only applies with --log")
+        _refuse_without_log(args)
         args.out_dir = args.out or runner.default_out_dir()
         frame = runner.run(args.methods, args.scenarios,
                            runner.DEFAULT_SEEDS if args.seeds is None else args.seeds,
                            conditions=args.conditions, seed_start=args.seed_start or 0, jobs=args.jobs,
                            out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress,
                            on_start=started, executor=executor(args), sealed=args.sealed)
-    from rippleb.report.tables import summary_text
+    from rippleb.report.recorded import run_summary
 
-    print(summary_text(frame))
+    print(run_summary(frame))
     counts = frame["status"].value_counts().to_dict() if len(frame) else {}
     print(f"\n{len(frame)} rows ({', '.join(f'{v} {k}' for k, v in counts.items()) or 'none'}) "
           f"in {args.out_dir / 'results.csv'}; total wall time {time.perf_counter() - start:.1f} s")
@@ -223,3 +237,35 @@ def _refuse_with_log(args) -> None:
                         ("--seed-start", args.seed_start), ("--resume", args.resume)):
         if value is not None:
             raise InputError(f"{flag} does not apply with --log")
+
+
+def _refuse_without_log(args) -> None:
+    for flag, value in (("--calibration", args.calibration), ("--joint", args.joint),
+                        ("--resample", args.resample or None)):
+        if value is not None:
+            raise InputError(f"{flag} only applies with --log")
+
+
+def read_logs(args):
+    """The scored and the calibration log of ``--log``, read with ``--joint`` and ``--resample``."""
+    from rippleb.data import read_log
+    from rippleb.joint_file import load_joint
+
+    joint = load_joint(args.joint) if args.joint is not None else None
+    log = read_log(args.log, joint=joint, resample=args.resample)
+    cal = None if args.calibration is None else read_log(args.calibration, spec=log.spec, joint=joint,
+                                                         resample=args.resample)
+    return log, cal
+
+
+def joint_block(args, log, cal) -> str:
+    """One block for stderr: every value the logs were read with, given or assumed."""
+    lines = [f"rippleb: {args.log.name}: read with these values (give the ASSUMED ones in --joint FILE, "
+             f"docs/your-joint.md):", *log.meta["joint"]]
+    if cal is not None:
+        lines += [f"rippleb: {args.calibration.name}: the joint values above; its columns:",
+                  *[line for line in cal.meta["joint"] if line.startswith("  column ")]]
+    if log.torque_ref is None and log.torque_true is None:
+        lines.append(f"rippleb: warning: {args.log.name} has no reference torque (torque_ref): its rows "
+                     f"get status no-reference; accuracy cannot be scored, cost can")
+    return "\n".join(lines)

@@ -31,7 +31,8 @@ def add_sweep(sub) -> None:
                     f"range, inclusive):\n{listing}")
     p.add_argument("--param", action="append", metavar="NAME=v1,v2,...",
                    help="a parameter and its values; repeat for a grid (required unless --resume)")
-    p.add_argument("--methods", help="comma-separated method names, or 'all' (default: every built-in)")
+    p.add_argument("--methods", help="comma-separated method names, or 'all' (default: every built-in); "
+                                     "'NAME[p=1,2]' for variants (docs/plugins.md)")
     p.add_argument("--scenarios", help="comma-separated scenario names or .toml paths "
                                        "(default: every scored built-in scenario)")
     p.add_argument("--conditions", metavar="A,B|all", help="deployment conditions (default: same-session)")

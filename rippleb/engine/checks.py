@@ -15,6 +15,7 @@ import numpy as np
 from rippleb.data import SensorLog
 from rippleb.errors import InputError
 from rippleb.metrics import MAX_DELAY_S
+from rippleb.timebase import uniform_rate
 from rippleb.engine.rows import check_trajectory
 
 MIN_FS, MAX_FS = 100.0, 1e6
@@ -101,7 +102,9 @@ def check_calibration(cal: SensorLog, name: str, scored: SensorLog) -> None:
 
 
 def rate_from_t(log: SensorLog) -> float:
-    """The sample rate [Hz] given by the log's time stamps (its spec's ``fs`` if it has one sample)."""
+    """The sample rate [Hz] given by the log's time stamps, their mean rate
+    (:func:`rippleb.timebase.uniform_rate`: robust to Unix time's quantized steps); its
+    spec's ``fs`` if it has one sample."""
     if len(log) < 2:
         return float(log.spec.fs)
-    return 1.0 / float(np.median(np.diff(log.t)))
+    return uniform_rate(log.t)

@@ -28,15 +28,16 @@ import numpy as np
 
 from rippleb.engine.cache import Artefact, load_log, log_bytes, pack, store
 from rippleb.data import SensorLog
-from rippleb import metrics
+from rippleb import metrics, truthfree
 from rippleb.metrics import Truth
 from rippleb.registry import one_line
+from rippleb.scorable import NO_REFERENCE, NO_REFERENCE_MESSAGE, implausible
 from rippleb.engine.rows import FITTING, SCORED
 from rippleb.streaming import InvalidOutput, prepare_blocks, stream
 
 #: Everything the metrics compare with: the per-sample arrays and events of
 #: :class:`~rippleb.metrics.Truth` (its own list) plus the two torque columns.
-TRUTH_ARRAYS = metrics.TRUTH_ARRAYS + ("torque_true", "torque_ref")
+TRUTH_ARRAYS = metrics.TRUTH_ARRAYS + ("torque_true", "torque_ref", "torque_gear")
 
 
 @dataclass(frozen=True)
@@ -195,16 +196,22 @@ def check_estimate(arrays: dict, n_samples: int, n_ticks: int) -> tuple[np.ndarr
 
 
 def score_or_invalid(estimate: np.ndarray, truth: Truth) -> dict:
-    """The accuracy columns of an estimate (:func:`rippleb.metrics.score`), or, when they
+    """The accuracy columns of an estimate (:func:`rippleb.metrics.score`) and its truth-free
+    columns (:func:`rippleb.truthfree.truth_free_scores`), or, when they
     cannot stand as an ``ok`` row, ``{"status": "invalid", "message": why}``.
 
     Every accuracy column must be finite or NaN (NaN: not defined for this log, e.g. no
     ``torque_true`` in a recording), and the errors against each reference the log has must
     be finite. A finite estimate can still overflow them (a strain scaled by 1e306 gave
     ``rms_error_ref_nm = inf``); the overflow itself is expected here, hence no warning.
+    A recorded log's row is ``invalid`` too when its estimate is beyond the joint's range,
+    and :data:`~rippleb.scorable.NO_REFERENCE` when the log has no reference (:mod:`rippleb.scorable`).
     """
+    why = implausible(estimate, truth.torque_limit)
+    if why:
+        return {"status": "invalid", "message": why}
     with np.errstate(over="ignore", invalid="ignore"):
-        scores = metrics.score(estimate, truth)
+        scores = {**metrics.score(estimate, truth), **truthfree.truth_free_scores(estimate, truth)}
     needed = {c for c, ref in (("rms_error_nm", truth.torque_true), ("max_error_nm", truth.torque_true),
                                 ("rms_error_ref_nm", truth.torque_ref), ("max_error_ref_nm", truth.torque_ref))
               if ref is not None}
@@ -212,5 +219,7 @@ def score_or_invalid(estimate: np.ndarray, truth: Truth) -> dict:
     if bad:
         return {"status": "invalid", "message": f"its scores are not finite ({', '.join(bad)}): the estimate "
                                                 f"or the log is beyond what float64 can score"}
+    if truth.torque_true is None and truth.torque_ref is None:
+        return {**scores, "status": NO_REFERENCE, "message": NO_REFERENCE_MESSAGE}
     return scores
 

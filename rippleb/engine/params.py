@@ -64,6 +64,9 @@ PARAMS = {p.name: p for p in (
           "harmonic-drive reduction (size-25 catalogue ratios 30-160; default 100)"),
     Param("temperature_c", float, -10.0, 80.0,
           "lubricant temperature of the scored session [degC] (default 40)", device=False),
+    Param("gear.transmission_error", float, 0.0, 5.8e-4,
+          "the drive's transmission-error class [rad peak to peak] (default 2.9e-4, the CSF "
+          "catalogue's standard class; 0: an ideal gear)"),
     Param("ripple.drift", float, 0.0, 5.0,
           "drift of ripple and bridge zero since calibration, x the documented estimate "
           "(default 1); acts under --conditions aged only", device=False),
@@ -76,7 +79,8 @@ PARAMS = {p.name: p for p in (
 #: few times the ``realistic`` magnitude (docs/sweeps.md gives the reason for each).
 UNMODELLED_RANGES = {
     "mismatch.gauge_mode_hz": (0.0, 5000.0), "mismatch.load_saturation": (0.0, 5.0),
-    "mismatch.flank_asymmetry": (0.0, 0.5), "thermal.gain_coeff": (-1.0e-3, 1.0e-3),
+    "mismatch.flank_asymmetry": (0.0, 0.5), "mismatch.extra_orders": (0.0, 3.0),
+    "mismatch.load_history": (0.0, 10.0), "thermal.gain_coeff": (-1.0e-3, 1.0e-3),
     "thermal.warmup_rate": (0.0, 10.0), "daq.adc_bits": (8, 24), "daq.antialias_hz": (0.0, 20_000.0),
     "daq.pwm_mv": (0.0, 100.0), "daq.pwm_hz": (4000.0, 100_000.0), "encoder.edge_error": (0.0, 30.0),
     "encoder.eccentricity": (0.0, 5.0), "encoder.missed": (0.0, 1.0e-3),

@@ -31,13 +31,21 @@ from rippleb.errors import InputError, RunWarning  # noqa: F401 - RunWarning: re
 from rippleb.files import atomic_path, open_appending
 from rippleb.metrics import METRIC_COLUMNS
 from rippleb.printable import escaped
+from rippleb.scorable import NO_REFERENCE
+from rippleb.truthfree import TRUTH_FREE_COLUMNS
 
 KEY_COLUMNS = ("method", "scenario", "condition", "seed")
-COLUMNS = (KEY_COLUMNS + ("status",) + METRIC_COLUMNS
+# The truth-free columns came later: a results file without them still reads (as n/a).
+COLUMNS = (KEY_COLUMNS + ("status",) + METRIC_COLUMNS + TRUTH_FREE_COLUMNS
            + ("message", "n_samples", "fit_s", "wall_s", "calibration", "params", "scenario_sha256",
               "rippleb_version", "python", "numpy", "platform", "cpu", "numerics", "run_id"))
-NUMERIC_COLUMNS = METRIC_COLUMNS + ("n_samples", "fit_s", "wall_s")
-STATUSES = ("ok", "error", "invalid", "timeout")
+NUMERIC_COLUMNS = METRIC_COLUMNS + TRUTH_FREE_COLUMNS + ("n_samples", "fit_s", "wall_s")
+STATUSES = ("ok", "error", "invalid", "timeout", NO_REFERENCE)
+#: Statuses of rows whose method ran to the end on a log it may be scored on: their cost is measured.
+MEASURED = ("ok", NO_REFERENCE)
+#: An ``ok`` row holds at least one of these: an error against a reference, or, on a log
+#: with none, a truth-free score.
+SCORE_COLUMNS = ("rms_error_nm", "rms_error_ref_nm") + TRUTH_FREE_COLUMNS
 #: message prefix of rows that failed for a reason outside the method (``--resume`` retries them)
 ENVIRONMENT = "environment: "
 #: The whole of ``results.csv`` is rewritten from memory at most this often [s] ...
@@ -309,6 +317,6 @@ def _check_row(header: list[str], cells: list[str]) -> tuple[dict, str | None]:
                 row[name] = float(row[name]) if row[name] != "" else math.nan
             except ValueError:
                 return row, f"holds {row[name][:20]!r} in the numeric column {name}"
-    if row["status"] == "ok" and not any(math.isfinite(row[c]) for c in ("rms_error_nm", "rms_error_ref_nm")):
-        return row, "is 'ok' without an RMS error"
+    if row["status"] == "ok" and not any(math.isfinite(row.get(c, math.nan)) for c in SCORE_COLUMNS):
+        return row, "is 'ok' without an RMS error or a truth-free score"
     return row, None

@@ -48,7 +48,8 @@ from rippleb.metrics import Truth, tick_stats
 from rippleb.engine.pool import Pool
 from rippleb.registry import Registry
 from rippleb.engine.executors import row_tasks
-from rippleb.engine.results import ResultsFile, RunWarning, row_key, say_other_versions
+from rippleb.engine.methods import base_name, resolve_methods
+from rippleb.engine.results import MEASURED, ResultsFile, RunWarning, row_key, say_other_versions
 from rippleb.engine.rows import (CALIBRATION, FITTING, MAX_SEEDS, SCORED, Case, RowKey, scenario_hash,
                                  select_conditions, select_scenarios, select_seeds, split_names)
 from rippleb.engine.rundir import log_dir, read_config, run_dir
@@ -71,8 +72,9 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, s
     Parameters
     ----------
     methods
-        Method names (a list or ``"a,b"``); None for every built-in method, ``"all"`` for
-        every built-in and plugin method.
+        Method names (a list or ``"a,b"``), or variants (``"order-tracking[q=20,30]"``,
+        :mod:`rippleb.variants`); None for every built-in method, ``"all"`` for every
+        built-in and plugin method.
     scenarios
         Scenario names or paths to ``.toml`` files; None for every scored built-in.
     seeds
@@ -200,7 +202,7 @@ def _warn_native_rows(rows: list[dict]) -> None:
 
 def run_log(log, calibration=None, methods=None, *, jobs: int = 1, out=None,
             timeout: float | None = DEFAULT_TIMEOUT_S, memory_mb: float | None = DEFAULT_MEMORY_MB,
-            progress: bool | None = False, on_start=None):
+            progress: bool | None = False, on_start=None, joint=None, resample: bool = False):
     """Run methods on a recorded log; score against ``torque_ref`` (and ``torque_true`` if present).
 
     Parameters
@@ -211,12 +213,15 @@ def run_log(log, calibration=None, methods=None, *, jobs: int = 1, out=None,
         rows then say ``calibration = self``: fit and scored on the same data).
     methods, jobs, out, timeout, memory_mb, progress, on_start
         As in :func:`run`.
+    joint, resample
+        As in :func:`rippleb.data.read_log`, for the logs given as paths; the calibration
+        log is read with the scored log's joint values.
     """
     from rippleb.data import read_log
 
     check_options(jobs=jobs, timeout=timeout, memory_mb=memory_mb)
-    log_name = Path(log).name if not isinstance(log, SensorLog) else log.meta.get("source", "log")
-    log = log if isinstance(log, SensorLog) else read_log(log)
+    log_name = _log_label(log, "log")
+    log = log if isinstance(log, SensorLog) else read_log(log, joint=joint, resample=resample)
     check_recording(log, log_name)
     if calibration is None:
         if log.torque_ref is None:
@@ -224,8 +229,9 @@ def run_log(log, calibration=None, methods=None, *, jobs: int = 1, out=None,
                              "pass --calibration FILE")
         cal, label = log, "self"
     else:
-        label = Path(calibration).name if not isinstance(calibration, SensorLog) else "calibration"
-        cal = calibration if isinstance(calibration, SensorLog) else read_log(calibration, spec=log.spec)
+        label = _log_label(calibration, "calibration")
+        cal = calibration if isinstance(calibration, SensorLog) else read_log(
+            calibration, spec=log.spec, joint=joint, resample=resample)
         if cal.torque_ref is None:
             raise InputError(f"{label}: a calibration log needs a torque_ref column")
         check_recording(cal, label)
@@ -246,18 +252,10 @@ def run_log(log, calibration=None, methods=None, *, jobs: int = 1, out=None,
                     config={"methods": names, "log": log_name, "conditions": [DEFAULT_CONDITION]})
 
 
-def resolve_methods(registry: Registry, methods) -> list[str]:
-    """Method names to run; unknown names raise :class:`InputError` with a suggestion."""
-    wanted = split_names(methods)
-    if methods is not None and not wanted:
-        raise InputError("--methods is empty; give method names or 'all'")
-    if not wanted:
-        return registry.names("builtin")
-    if wanted == ["all"]:
-        return registry.names()
-    for name in wanted:
-        registry.get(name)
-    return list(dict.fromkeys(wanted))
+def _log_label(log, default: str) -> str:
+    """The file name of a log given as a path or read from one (its ``meta["source"]``)."""
+    source = log.meta.get("source") if isinstance(log, SensorLog) else log
+    return Path(source).name if source else default
 
 
 def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, progress, config,
@@ -345,7 +343,7 @@ def _warm(registry, plan: Plan) -> None:
 
     for scenario, _ in plan.sims.values():
         robot.load_model(scenario.robot)
-    registry.load_builtins({key.method for key in plan.rows})
+    registry.load_builtins({base_name(key.method) for key in plan.rows})
 
 
 def default_out_dir() -> Path:
@@ -372,6 +370,6 @@ def evaluate(cls, calibration: SensorLog, evaluation: SensorLog, truth: Truth, p
     fields = result["info"]
     if fields["status"] == "ok":
         fields.update(job_fns.score_or_invalid(result["estimate"], truth))
-    if fields["status"] == "ok":
+    if fields["status"] in MEASURED:
         fields.update(tick_stats(result["ticks"], len(evaluation)))
     return fields

@@ -1,9 +1,8 @@
 """Scheduling a planned run: simulations, fits and rows as isolated jobs, scored here.
 
-The state (:class:`State`) holds the only copy of the truth, per scored case and only while
-rows of it are open. Jobs are :mod:`rippleb.engine.jobs` functions run by :class:`rippleb.engine.pool.Pool`;
-what they send back is read as plain arrays and a whitelist of typed fields.
-"""
+The state (:class:`State`) holds the only copy of the truth, per scored case and only while rows of
+it are open. Jobs are :mod:`rippleb.engine.jobs` functions, given a row's method label as name and params
+(:func:`rippleb.variants.split_label`); what they send back is read as plain arrays and typed fields."""
 
 from __future__ import annotations
 
@@ -23,7 +22,8 @@ from rippleb.data import SensorLog
 from rippleb.metrics import tick_stats
 from rippleb.engine.pool import Pool
 from rippleb.registry import Registry, one_line
-from rippleb.engine.results import ENVIRONMENT, STATUSES, ResultsFile, RunWarning, system_info
+from rippleb.variants import split_label
+from rippleb.engine.results import ENVIRONMENT, MEASURED, STATUSES, ResultsFile, RunWarning, system_info
 from rippleb.engine.rows import SCORED, Case, RowKey
 from rippleb.engine.sealing import SEALED_COLUMN
 
@@ -251,7 +251,7 @@ def _unphysical(state: State, case: Case, cal_case: Case) -> str | None:
 
 
 def _fit_job(fit: Fit, state: State) -> job_fns.Job:
-    return job_fns.Job("fit", (fit.method, None, state.artefacts[fit.calibration]))
+    return job_fns.Job("fit", (*split_label(fit.method), state.artefacts[fit.calibration]))
 
 
 def _fit_outcome(fin, state: State) -> dict:
@@ -295,7 +295,7 @@ def _row_job(key: RowKey, state: State, fit: dict, evaluation: SensorLog) -> job
     calibration = state.artefacts[cal_case]
     fitted = Artefact(**fit["fitted"]) if isinstance(fit.get("fitted"), dict) else None
     fit_info = {k: fit[k] for k in ("params", "fit_s") if k in fit} if fitted else None
-    return job_fns.Job("row", (key.method, None, calibration, evaluation, fitted, fit_info))
+    return job_fns.Job("row", (*split_label(key.method), calibration, evaluation, fitted, fit_info))
 
 
 def _finish_row(fin, state: State, bar) -> None:
@@ -327,7 +327,7 @@ def _score_row(value: bytes, state: State, case: Case) -> dict:
     estimate, ticks = checked
     fields["n_samples"] = n_samples
     fields.update(job_fns.score_or_invalid(estimate, truth))
-    if fields["status"] == "ok":
+    if fields["status"] in MEASURED:
         fields.update(tick_stats(ticks, n_samples))
     return fields
 

@@ -16,9 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
-from rippleb.report.error_figures import (error_by_speed, error_by_speed_over_seeds, longest_rest_restart,  # noqa: F401
-                                   plot_accuracy_vs_cost, plot_error_vs_speed, plot_residual_spectra,
-                                   plot_restart_zoom, residual_spectra, speed_edges)
+from rippleb.scorable import NO_REFERENCE
+from rippleb.report.error_figures import (COST_FIGURE_LABELS, error_by_speed,  # noqa: F401
+                                   error_by_speed_over_seeds, longest_rest_restart, plot_accuracy_vs_cost,
+                                   plot_error_vs_speed, plot_residual_spectra, plot_restart_zoom,
+                                   residual_spectra, speed_edges)
 from rippleb.report.plotting import (METHOD_STYLE, MOTION_EDGE_LABEL, SIGNAL_SCENARIOS, ScenarioSignals,  # noqa: F401
                               _amplitude, _motion_edges, _pyplot, _save, fit_methods, stream_methods, style)
 
@@ -255,7 +257,8 @@ def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
     figures["fig2_order_spectra"] = (plot_order_spectra(path("fig2_order_spectra"), seed=seed),
                                      f"Strain spectra over time and over angle (Fig. 2 replica, seed {seed})")
     frame = with_condition(frame)
-    ok = frame[(frame["status"] == "ok") & (frame["condition"] == DEFAULT_CONDITION)]
+    # a recording without a reference (no-reference rows) is still drawn by its truth-free column
+    ok = frame[frame["status"].isin(("ok", NO_REFERENCE)) & (frame["condition"] == DEFAULT_CONDITION)]
     methods = method_order(ok["method"].unique())
     scenarios = [s for s in SIGNAL_SCENARIOS if s in set(ok["scenario"])]
     signals = {}
@@ -297,9 +300,25 @@ def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
         zoom = plot_restart_zoom(signals["stop-restart"], path("restart_zoom"), seed)
         if zoom is not None:
             figures["restart_zoom"] = (zoom, f"Zoom on a restart of stop-restart (seed {seed})")
-    figures["accuracy_vs_cost"] = (plot_accuracy_vs_cost(ok, path("accuracy_vs_cost")),
-                                   "Accuracy against per-tick cost, from the rows (same-session)")
+    column = _cost_figure_column(ok)
+    if column is not None:  # no row with a score: no empty figure
+        what = "Accuracy" if column == "rms_error_nm" else f"`{column}`"
+        figures["accuracy_vs_cost"] = (plot_accuracy_vs_cost(ok, path("accuracy_vs_cost"), column),
+                                       f"{what} against per-tick cost, from the rows (same-session)")
     return figures, warnings
+
+
+def _cost_figure_column(ok) -> str | None:
+    """What the accuracy-against-cost figure plots: ``rms_error_nm``, or on a recorded log the
+    column it is ranked by (:func:`rippleb.report.recorded.ranking_column`); None if no ok row
+    has a value in it."""
+    from rippleb.report.recorded import ranking_column
+    from rippleb.report.tables import is_recorded
+
+    column = ranking_column(ok) if len(ok) and is_recorded(ok) else "rms_error_nm"
+    # only the columns the figure's log axis can show (a delay may be negative or zero)
+    plottable = column in COST_FIGURE_LABELS and column in ok and ok[column].notna().any()
+    return column if plottable else None
 
 
 def _signals_of_seed(methods, scenarios, seed: int) -> tuple[dict, list]:

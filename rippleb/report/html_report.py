@@ -25,7 +25,8 @@ from rippleb.report.stats import (condition_order, fmt_interval, interval_frame,
 COLORS = {"raw": "#1f77b4", "lowpass": "#17becf", "current-based": "#bf00bf", "order-tracking": "#d62728",
           "order-tracking-no-deadzone": "#ff7f0e", "order-tracking-no-backprop": "#8c564b",
           "switched-notch": "#2ca02c", "kalman-ripple": "#9467bd", "angle-adaptive": "#bcbd22",
-          "angle-adaptive-frozen": "#7f7f7f"}
+          "angle-adaptive-frozen": "#7f7f7f", "spatial-filter": "#aec7e8", "fourier-lms": "#e377c2",
+          "periodic-dob": "#393b79", "gear-aware": "#525252"}
 
 STYLE = """body{font-family:system-ui,sans-serif;margin:1.5em auto;max-width:1200px;color:#222}
 table{border-collapse:collapse;margin:.5em 0 1.5em;font-size:13px}
@@ -71,8 +72,12 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
     from rippleb.report.tables import (condition_headline, condition_summary_markdown, counts_sentence, is_recorded,
                                 title_lines)
 
+    from rippleb.report.recorded import ranking_column
+
     frame = with_condition(frame)
-    figures = [_rows_figure(frame), _cost_figure(frame)]
+    recorded = is_recorded(frame)
+    column = ranking_column(frame) if recorded else "rms_error_nm"
+    figures = [_rows_figure(frame, column), _cost_figure(frame, column)]
     restart = _restart_figure(frame, figure_seed, signals)
     if restart is not None:
         figures.append(restart)
@@ -82,10 +87,13 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
     title = title_lines(prov.get("published", False), is_recorded(frame), str(prov.get("run_dir", "DIR")))
     body = [f"<h1>{_md(title[0].lstrip('# '))}</h1>", f"<p>{_md(title[2])}</p>",
             f"<p>{_md(counts_sentence(frame, is_recorded(frame)))}</p>",
-            '<ul id="page-errors"></ul>',
-            "<h2>Method x condition: mean RMS error over the scenarios [Nm]</h2>",
-            _markdown_table(condition_summary_markdown(frame)),
-            "<ul>" + "".join(f"<li>{_md(s)}</li>" for s in condition_headline(frame)) + "</ul>"]
+            '<ul id="page-errors"></ul>']
+    if recorded:
+        body += _recorded_body(frame)
+    else:
+        body += ["<h2>Method x condition: mean RMS error over the scenarios [Nm]</h2>",
+                 _markdown_table(condition_summary_markdown(frame)),
+                 "<ul>" + "".join(f"<li>{_md(s)}</li>" for s in condition_headline(frame)) + "</ul>"]
     if frame["condition"].nunique() > 1:
         from rippleb.report.verdicts import method_verdicts
 
@@ -114,11 +122,31 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
 
 # --------------------------------------------------------------------------- tables
 
-def metric_columns(frame) -> list[str]:
-    """Every numeric metric column of the rows that has a value."""
-    from rippleb.metrics import METRIC_COLUMNS
+def _recorded_body(frame) -> list[str]:
+    """A recorded log's ranking (:mod:`rippleb.report.recorded`): per log, its basis, the table
+    and who leads; then what the truth-free columns cannot tell."""
+    from rippleb.report.recorded import (TRUTH_FREE_CAVEATS, UNITS_NOTE, basis_sentence, leader_sentence,
+                                         log_markdown, ranking_column)
+    from rippleb.report.stats import ok_rows
 
-    return [c for c in METRIC_COLUMNS if c in frame and frame[c].notna().any()]
+    body = []
+    for log in scenario_order(frame["scenario"].unique()):
+        rows = frame[frame["scenario"] == log]
+        column = ranking_column(rows)
+        body += [f"<h2>{_md(f'`{log}`: methods ranked by `{column}`')}</h2>", f"<p>{_md(basis_sentence(column))}</p>"]
+        if len(ok_rows(rows)):
+            body += [_markdown_table(log_markdown(rows)), f'<p class="note">{_md(UNITS_NOTE)}</p>',
+                     f"<p>{_md(leader_sentence(rows, column))}</p>"]
+    return body + ["<h3>What the truth-free columns cannot tell</h3>",
+                   "<ul>" + "".join(f"<li>{_md(c)}</li>" for c in TRUTH_FREE_CAVEATS) + "</ul>"]
+
+
+def metric_columns(frame) -> list[str]:
+    """Every numeric metric column of the rows that has a value, the truth-free ones included."""
+    from rippleb.metrics import METRIC_COLUMNS
+    from rippleb.truthfree import TRUTH_FREE_COLUMNS
+
+    return [c for c in METRIC_COLUMNS + TRUTH_FREE_COLUMNS if c in frame and frame[c].notna().any()]
 
 
 def _metrics_table(rows) -> str:
@@ -184,8 +212,14 @@ def _color(method: str, index: int) -> str:
     return COLORS.get(method, fallback[index % len(fallback)])
 
 
-def _rows_figure(frame):
-    """``rms_error_nm`` of every ok row by scenario, one trace per method, one panel row per
+#: Axis titles of the figures per column they may plot (``rms_error_nm``, or what a recorded
+#: log is ranked by).
+AXIS_TITLES = {"rms_error_nm": "RMS error [Nm]", "rms_error_ref_nm": "RMS error against torque_ref [Nm]",
+               "ripple_wg_nm": "ripple left at WG orders 2, 4, 8 [Nm]"}
+
+
+def _rows_figure(frame, column: str = "rms_error_nm"):
+    """``column`` of every ok row by scenario, one trace per method, one panel row per
     condition; hover shows method, scenario, condition, seed."""
     import plotly.graph_objects as go
     from plotly.subplots import make_subplots
@@ -202,20 +236,20 @@ def _rows_figure(frame):
             mine = rows[rows["method"] == m]
             fig.add_trace(go.Scatter(
                 x=[scenarios.index(s) + (i - len(methods) / 2) * 0.08 for s in mine["scenario"]],
-                y=mine["rms_error_nm"], mode="markers", name=m, legendgroup=m, showlegend=(k == 1),
+                y=mine[column], mode="markers", name=m, legendgroup=m, showlegend=(k == 1),
                 marker={"color": _color(m, i), "size": 6, "opacity": 0.75},
                 customdata=np.column_stack([mine["method"], mine["scenario"], mine["condition"], mine["seed"]]),
                 hovertemplate="method %{customdata[0]}<br>scenario %{customdata[1]}<br>condition "
-                              "%{customdata[2]}<br>seed %{customdata[3]}<br>RMS error %{y:.4g} Nm<extra></extra>"),
+                              "%{customdata[2]}<br>seed %{customdata[3]}<br>" + column + " %{y:.4g}<extra></extra>"),
                 row=k, col=1)
-        fig.update_yaxes(type="log", title_text="RMS error [Nm]", row=k, col=1)
+        fig.update_yaxes(type="log", title_text=AXIS_TITLES.get(column, column), row=k, col=1)
     fig.update_xaxes(tickvals=list(range(len(scenarios))), ticktext=scenarios)
     fig.update_layout(height=320 * len(conditions) + 80, margin={"t": 40, "b": 40}, legend={"orientation": "h"})
     return fig
 
 
-def _cost_figure(frame):
-    """Every ok row: ``us_per_tick_p50`` against ``rms_error_nm``, hover names the row."""
+def _cost_figure(frame, column: str = "rms_error_nm"):
+    """Every ok row: ``us_per_tick_p50`` against ``column``, hover names the row."""
     import plotly.graph_objects as go
 
     ok = frame[frame["status"] == "ok"]
@@ -224,12 +258,14 @@ def _cost_figure(frame):
     for i, m in enumerate(method_order(ok["method"].unique())):
         mine = ok[ok["method"] == m]
         fig.add_trace(go.Scatter(
-            x=mine[cost], y=mine["rms_error_nm"], mode="markers", name=m, marker={"color": _color(m, i), "size": 6},
+            x=mine[cost], y=mine[column], mode="markers", name=m, marker={"color": _color(m, i), "size": 6},
             customdata=np.column_stack([mine["method"], mine["scenario"], mine["condition"], mine["seed"]]),
             hovertemplate="method %{customdata[0]}<br>scenario %{customdata[1]}<br>condition %{customdata[2]}"
-                          "<br>seed %{customdata[3]}<br>" + cost + " %{x:.3g} us<br>RMS error %{y:.4g} Nm<extra></extra>"))
+                          "<br>seed %{customdata[3]}<br>" + cost + " %{x:.3g} us<br>" + column
+                          + " %{y:.4g}<extra></extra>"))
+    title = "RMS error against torque_true [Nm]" if column == "rms_error_nm" else AXIS_TITLES.get(column, column)
     fig.update_layout(xaxis={"type": "log", "title": f"{cost} [us]"},
-                      yaxis={"type": "log", "title": "RMS error against torque_true [Nm]"},
+                      yaxis={"type": "log", "title": title},
                       height=480, margin={"t": 30})
     return fig
 

@@ -18,7 +18,9 @@ METHOD_STYLE = {
     "raw": ("tab:blue", "-"), "lowpass": ("tab:cyan", "-"), "current-based": ("m", "--"),
     "order-tracking": ("tab:red", "-"), "order-tracking-no-deadzone": ("tab:orange", "-."),
     "order-tracking-no-backprop": ("tab:brown", ":"), "switched-notch": ("tab:green", "-"),
-    "kalman-ripple": ("tab:purple", "-"),
+    "kalman-ripple": ("tab:purple", "-"), "spatial-filter": ("tab:blue", "--"),
+    "fourier-lms": ("tab:pink", "-"), "periodic-dob": ("tab:purple", "--"),
+    "gear-aware": ("tab:gray", "--"),
 }
 #: Scenarios whose signals the figures need: Table I/Fig. 5/6, speed coverage, restarts.
 SIGNAL_SCENARIOS = ("paper-quintic", "speed-sweep", "stop-restart")
@@ -48,16 +50,19 @@ def fit_methods(methods, seed: int) -> tuple[dict, dict]:
     """Instantiate and ``fit`` each method on the calibration log of ``seed``, once.
 
     Returns ``(fitted, errors)``: method name to fitted instance, and to a one-line error.
+    A name may be a variant's label (``order-tracking[q=20]``): built with its parameters.
     """
     from rippleb.registry import Registry, one_line
     from rippleb.simulator import simulate
+    from rippleb.variants import parse_label
 
     registry = Registry.discover()
     calibration = simulate("calibration", seed).log.for_method(keep_ref=True)
     fitted, errors = {}, {}
     for name in methods:
         try:
-            method = registry.get(name).load()()
+            variant = parse_label(name)
+            method = registry.get(variant.name).load()(**variant.params)
             method.fit(calibration)
         except Exception as exc:  # a failing method costs its curves, not the report
             errors[name] = one_line(exc)

@@ -241,6 +241,8 @@ def machine_rows(run: dict) -> list[list[str]]:
     return [["versions that compute the numbers", ", ".join(f"{k} {v}" for k, v in versions.items())],
             ["CPU SIMD features (LLVM)", machine.get("cpu_simd", "not recorded")],
             ["numba compiles for", machine.get("numba_cpu", "not recorded")],
+            *([["CPU description faked", f"RIPPLEB_FAKE_CPU={machine['fake_cpu']} (a test of the "
+                 "description; the numbers came from the real CPU)"]] if machine.get("fake_cpu") else []),
             ["numeric paths", f"{machine.get('numerics', 'not recorded')} (numpy dispatch "
              f"{machine.get('numpy_dispatch', '?')}, OpenBLAS {machine.get('openblas', '?')}, "
              f"{machine.get('libc', '?')})"]]

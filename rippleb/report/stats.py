@@ -18,7 +18,7 @@ PAPER_SCENARIO = "paper-quintic"
 #: The order methods appear in (baselines, the paper's comparison, then the alternatives).
 METHOD_ORDER = ("raw", "lowpass", "current-based", "order-tracking", "order-tracking-no-deadzone",
                 "order-tracking-no-backprop", "switched-notch", "kalman-ripple", "angle-adaptive",
-                "angle-adaptive-frozen")
+                "angle-adaptive-frozen", "gear-aware", "spatial-filter", "fourier-lms", "periodic-dob")
 
 
 def t_interval(values, confidence: float = CONFIDENCE) -> tuple[float, float, int]:
@@ -117,9 +117,20 @@ def per_seed_mean_over_scenarios(frame, column: str = "rms_error_nm"):
 
 
 def method_order(names) -> list[str]:
-    """Built-in methods in :data:`METHOD_ORDER`, then any other (plugins) alphabetically."""
-    names = set(names)
-    return [m for m in METHOD_ORDER if m in names] + sorted(names - set(METHOD_ORDER))
+    """Built-in methods in :data:`METHOD_ORDER`, then any other (plugins) alphabetically;
+    a method's variants (``order-tracking[q=20]``, :mod:`rippleb.variants`) right after it,
+    numbers in their labels compared as numbers (``q=30`` before ``q=100``)."""
+    return sorted(set(names), key=_method_key)
+
+
+def _method_key(label: str) -> tuple:
+    import re
+
+    base = label.partition("[")[0]
+    rank = METHOD_ORDER.index(base) if base in METHOD_ORDER else len(METHOD_ORDER)
+    natural = tuple((0, float(part), "") if re.fullmatch(r"\d+(\.\d*)?", part) else (1, 0.0, part)
+                    for part in re.split(r"(\d+(?:\.\d*)?)", label) if part)
+    return rank, base, label != base, natural
 
 
 def scenario_order(names) -> list[str]:

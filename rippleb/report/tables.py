@@ -16,6 +16,7 @@ from rippleb.report.stats import (condition_order, fmt_interval, interval_frame,
                            ok_rows, per_seed_mean_over_scenarios, scenario_order, t_interval,
                            with_condition)
 from rippleb.report.markdown import escape_cell, first_line, markdown, one_line, plural  # noqa: F401 - re-exported
+from rippleb.report.paired import lead_text, paired_lead
 from rippleb.report.table_one import TABLE_I_METHODS, TABLE_I_SCENARIO
 
 #: Columns of the accuracy matrices: (title, unit).
@@ -29,12 +30,19 @@ MATRIX_COLUMNS = {
     "stopped_rms_error_nm": ("RMS error while the joint is at rest", "Nm"),
     "bandwidth_hz": ("bandwidth of the estimate against torque_true", "Hz"),
     "step_latency_ms": ("latency of the estimate after a torque step", "ms"),
+    # What each method did with the real torque the gear's transmission error puts at the
+    # ripple's own orders (rippleb/simulator/transmission.py): kept (0) or erased (1).
+    "gear_erased_fraction": ("fraction of the gear's real torque (transmission error) the method erased; "
+                             "0: kept, 1: erased", "1"),
+    "rms_error_without_gear_nm": ("RMS error against torque_true without the gear's transmission-error torque",
+                                  "Nm"),
 }
 
 #: Columns that are a pure function of method, scenario, condition and seed (no clock in
 #: them), so a re-run must reproduce them exactly; ``tests/test_published.py`` checks them.
 ACCURACY_COLUMNS = ("rms_error_nm", "max_error_nm", "rms_error_ref_nm", "max_error_ref_nm",
-                    "delay_ms", "restart_max_error_nm", "stopped_rms_error_nm", "n_samples")
+                    "delay_ms", "restart_max_error_nm", "stopped_rms_error_nm", "gear_torque_rms_nm",
+                    "gear_erased_fraction", "rms_error_without_gear_nm", "n_samples")
 
 #: A timing cell is flagged noisy when its p99 spreads over seeds by more than this
 #: fraction of its median (interquartile range over median): on a quiet machine the
@@ -202,17 +210,21 @@ def ranking(frame, column: str = "rms_error_nm"):
 
 
 def ranking_markdown(frame, column: str = "rms_error_nm") -> str:
-    """One line per scenario: the methods best to worst, then who leads and whether the
-    lead is resolved at 95 % (the two intervals do not overlap)."""
+    """One line per scenario: the methods best to worst, then whether the first leads the
+    second by their paired per-device difference (:mod:`rippleb.report.paired`), the
+    intervals corrected for one claim per scenario."""
     ranked = ranking(frame, column)
     if ranked.empty:
         return "(no ok rows to rank)"
+    ok = ok_rows(frame)
+    scenarios = scenario_order(ranked["scenario"].unique())
     rows = []
-    for scenario in scenario_order(ranked["scenario"].unique()):
+    for scenario in scenarios:
         group = ranked[ranked["scenario"] == scenario]
         order = ", ".join(f"{r.method} ({fmt_interval(r.mean, r.half)})" for r in group.itertuples())
-        rows.append([scenario, order, lead_sentence(group)])
-    return markdown(rows, ["scenario", f"methods by mean {column}, best first", "lead"])
+        per_seed = ok[ok["scenario"] == scenario].groupby(["method", "seed"])[column].mean()
+        rows.append([scenario, order, lead_sentence(group, per_seed, claims=len(scenarios))])
+    return markdown(rows, ["scenario", f"methods by mean {column}, best first", "lead (paired per device)"])
 
 
 def headline_sentences(frame, column: str = "rms_error_nm") -> list[str]:
@@ -235,27 +247,14 @@ def headline_sentences(frame, column: str = "rms_error_nm") -> list[str]:
     return out
 
 
-def separation(first: dict, second: dict) -> str:
-    """``separated`` if the 95 % intervals of two ``{mean, half}`` do not overlap (first
-    lower), ``overlap`` if they do, ``unknown`` if either has no interval (one seed)."""
-    if not (np.isfinite(first["half"]) and np.isfinite(second["half"])):
-        return "unknown"
-    return "separated" if first["mean"] + first["half"] < second["mean"] - second["half"] else "overlap"
-
-
-def lead_sentence(group) -> str:
-    """Whether the first of ``group`` (sorted rows with ``method, mean, half``) is separated
-    from the second at 95 %."""
-    first = group.iloc[0].to_dict()
+def lead_sentence(group, per_seed, claims: int = 1) -> str:
+    """Whether the first of ``group`` (sorted rows with ``method, mean``) leads the second,
+    by the paired difference of ``per_seed`` (a Series indexed by method and seed)."""
+    first = group.iloc[0]["method"]
     if len(group) < 2:
-        return f"{first['method']} is the only method with ok rows"
-    second = group.iloc[1].to_dict()
-    verdict = separation(first, second)
-    if verdict == "unknown":
-        return f"{first['method']} leads; one seed gives no interval to judge the lead"
-    if verdict == "separated":
-        return f"{first['method']} leads {second['method']}; the 95 % intervals do not overlap"
-    return f"{first['method']} and {second['method']} are not separated: their 95 % intervals overlap"
+        return f"{first} is the only method with ok rows"
+    second = group.iloc[1]["method"]
+    return lead_text(first, second, paired_lead(per_seed[first], per_seed[second], claims))
 
 
 # --------------------------------------------------------------------------- conditions
@@ -305,13 +304,16 @@ def condition_summary_markdown(frame, column: str = "rms_error_nm") -> str:
 
 
 def condition_headline(frame, column: str = "rms_error_nm") -> list[str]:
-    """Who leads under which condition, by the method x condition summary, and whether the
-    leader changes between conditions; every number from the rows."""
+    """Who has the lowest mean under which condition, by the method x condition summary,
+    whether it leads the second by their paired per-device difference (one claim per
+    condition), and whether the leader changes between conditions; every number from
+    the rows."""
     table = condition_summary(frame, column)
     if table.empty:
         return []
     out, leaders = [], {}
-    for condition in condition_order(table["condition"].unique()):
+    conditions = condition_order(table["condition"].unique())
+    for condition in conditions:
         group = table[table["condition"] == condition].dropna(subset=["mean"])
         if group.empty:
             continue
@@ -322,17 +324,23 @@ def condition_headline(frame, column: str = "rms_error_nm") -> list[str]:
                 f"{scen} every method finished ({fmt_interval(first['mean'], first['half'])})")
         if len(group) > 1:
             second = group.iloc[1]
-            verdict = {"separated": "the 95 % intervals do not overlap",
-                       "overlap": "the two are not separated: their 95 % intervals overlap",
-                       "unknown": "one seed gives no interval to judge the lead"}
+            rows = with_condition(frame)
+            per_seed, _ = per_seed_mean_over_scenarios(rows[rows["condition"] == condition], column)
+            per_seed = per_seed.set_index(["method", "seed"])["value"]
+            lead = paired_lead(per_seed[first["method"]], per_seed[second["method"]], claims=len(conditions))
+            verdict = {"separated": f"it leads by {lead.describe()}",
+                       "not separated": f"the two are not separated: {lead.describe()}, an interval that "
+                                        f"includes 0",
+                       "unknown": "fewer than two shared devices give no paired interval"}
             text += (f", ahead of `{second['method']}` ({fmt_interval(second['mean'], second['half'])}); "
-                     f"{verdict[separation(first, second)]}")
+                     f"{verdict[lead.verdict]}")
         out.append(text + ".")
     if len(set(leaders.values())) > 1:
-        out.append("The leader depends on the condition: " +
+        out.append("The lowest mean depends on the condition: " +
                    ", ".join(f"`{m}` under `{c}`" for c, m in leaders.items()) + ".")
     elif len(leaders) > 1:
-        out.append(f"`{next(iter(leaders.values()))}` leads under every condition of this run.")
+        out.append(f"`{next(iter(leaders.values()))}` has the lowest mean under every condition of this "
+                   f"run (where that lead is separated is said per condition above).")
     return out
 
 

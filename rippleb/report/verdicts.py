@@ -39,6 +39,26 @@ MECHANISMS = {
                       "dynamics, a saturating load law, a flank change) is what it cannot learn",
     "angle-adaptive-frozen": "the calibration's map, never adapted: exact while the joint stays as "
                              "calibrated, wrong by whatever changed since (aging, re-assembly)",
+    "gear-aware": "angle-adaptive-frozen's map fitted beside an inertial model of the gear's "
+                  "transmission-error torque, which it keeps: it removes what the calibration's "
+                  "ripple map holds and no more, so it is wrong by whatever changed since "
+                  "calibration, and a gear torque the inertial model misses (a resonance) is "
+                  "taken for ripple",
+    "spatial-filter": "band-passes at orders 2, 4, 8 stepped in angle: they need no map, so drift, "
+                      "re-assembly and power cycles pass them by, but they fade out at rest and at "
+                      "low speed (the ripple stays there) and take the part of every torque change "
+                      "that falls near the ripple orders in angle",
+    "fourier-lms": "a map of fixed harmonics of the encoder angle, warm-started from calibration and "
+                   "adapted by LMS per radian turned: it follows drift and load as fast as its step "
+                   "allows and holds at rest, but over a short move the torque correlates with the "
+                   "harmonics and leaks into the weights, which then hold it at rest; it runs in the "
+                   "wrong frame until the first index pulse after a power cycle, and cannot follow "
+                   "orders it does not list or components locked to the output",
+    "periodic-dob": "a comb over one turn of the encoder angle, any ripple shape, learned on the "
+                    "strain minus a low-passed torque: it holds at rest and needs no order list, but "
+                    "learns slowly (the load dependence and a changed ripple take many turns), "
+                    "is resolved to its angle bins and runs in the wrong frame until the first "
+                    "index pulse after a power cycle",
 }
 
 
@@ -57,11 +77,15 @@ def method_verdicts(frame, column: str = "rms_error_nm", reference: str = "same-
         rows = table[table["method"] == method].set_index("condition")
         best, worst = rows["mean"].idxmin(), rows["mean"].idxmax()
         wins = [c for c in rows.index if rows.loc[c, "rank"] == 1]
-        text = f"`{method}`: " + (f"leads under {', '.join(f'`{c}`' for c in wins)}; " if wins else "")
-        text += (f"best under `{best}` ({fmt_interval(rows.loc[best, 'mean'], rows.loc[best, 'half'])}, "
-                 f"rank {rows.loc[best, 'rank']} of {n_methods[best]}), worst under `{worst}` "
-                 f"({fmt_interval(rows.loc[worst, 'mean'], rows.loc[worst, 'half'])}, rank "
-                 f"{rows.loc[worst, 'rank']} of {n_methods[worst]})")
+        text = f"`{method}`: " + (f"lowest mean under {', '.join(f'`{c}`' for c in wins)}; " if wins else "")
+        if len(rows) == 1:   # one condition: where it ranks there
+            text += (f"rank {rows.loc[best, 'rank']} of {n_methods[best]} under `{best}` "
+                     f"({fmt_interval(rows.loc[best, 'mean'], rows.loc[best, 'half'])})")
+        else:
+            text += (f"best under `{best}` ({fmt_interval(rows.loc[best, 'mean'], rows.loc[best, 'half'])}, "
+                     f"rank {rows.loc[best, 'rank']} of {n_methods[best]}), worst under `{worst}` "
+                     f"({fmt_interval(rows.loc[worst, 'mean'], rows.loc[worst, 'half'])}, rank "
+                     f"{rows.loc[worst, 'rank']} of {n_methods[worst]})")
         if reference in rows.index and mismatch in rows.index:
             ref, mis = rows.loc[reference, "mean"], rows.loc[mismatch, "mean"]
             text += (f"; the physics no method models (`{mismatch}` against `{reference}`) "

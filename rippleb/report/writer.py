@@ -26,6 +26,7 @@ from rippleb.report.provenance import (collect_provenance, environment_sentence,
                                 provenance_markdown,  # noqa: F401
                                 read_run_provenance, seeds_text)
 from rippleb.metrics import METRIC_COLUMNS
+from rippleb.truthfree import TRUTH_FREE_COLUMNS
 from rippleb.engine.results import RunWarning, copy_rows, row_key, swept_columns
 from rippleb.engine.sealing import sealed_text
 from rippleb.report.verdicts import method_verdicts
@@ -63,7 +64,8 @@ def frame_condition_count(frame) -> int:
 
 
 #: Metrics that no row can hold below zero (``step_latency_ms`` can: an estimate may lead).
-NON_NEGATIVE = tuple(c for c in METRIC_COLUMNS if c != "step_latency_ms")
+NON_NEGATIVE = tuple(c for c in METRIC_COLUMNS if c not in ("step_latency_ms", "gear_erased_fraction")) + \
+    ("ripple_wg_nm", "rest_std_nm")
 
 
 def _warn_implausible(frame, path) -> None:
@@ -71,7 +73,7 @@ def _warn_implausible(frame, path) -> None:
     metric cannot be (an RMS error), or infinite (n/a is empty, never inf). The rows are
     kept and reported as they are: the file says so, the report must not hide it."""
     bad = []
-    for column in METRIC_COLUMNS:
+    for column in METRIC_COLUMNS + TRUTH_FREE_COLUMNS:
         if column not in frame:
             continue
         values = frame[column].astype(float)
@@ -88,15 +90,21 @@ def _warn_implausible(frame, path) -> None:
 
 def tables_markdown(frame) -> str:
     """The README's tables and their sentences: a pure function of the rows, so
-    ``tests/test_published.py`` can regenerate it and find it in ``results/README.md``."""
+    ``tests/test_published.py`` can regenerate it and find it in ``results/README.md``.
+    A recorded log has its own (:mod:`rippleb.report.recorded`)."""
+    if is_recorded(frame):
+        from rippleb.report.recorded import recorded_tables_markdown
+
+        return recorded_tables_markdown(frame)
     source = "Recorded" if is_recorded(frame) else "Simulated"
     parts = ["## Method x condition (mean `rms_error_nm` over the scenarios, 95 % interval)", "",
              "Per seed (device), the mean RMS error over the scenarios every method finished under "
              "that condition; then mean ± 95 % t-interval over seeds.", "",
              condition_summary_markdown(frame), ""]
     parts += [f"- {s}" for s in condition_headline(frame)] + [""]
+    parts += _gear_section(frame)
     verdicts = method_verdicts(frame)
-    if verdicts and frame_condition_count(frame) > 1:
+    if verdicts:
         parts += ["### Each method in plain words", "",
                   "Where it wins and where it breaks, from the table above; why, from what the "
                   "method assumes of the ripple (its page under docs/methods/).", ""]
@@ -105,6 +113,25 @@ def tables_markdown(frame) -> str:
         parts += _condition_section(condition, rows, source)
     parts += ["## Rows that did not finish ok", "", failed_markdown(frame)]
     return "\n".join(parts)
+
+
+def _gear_section(frame) -> list[str]:
+    """What each method did with the gear's real torque (docs/metrics.md, "What a method
+    erased"): the share it erased and its error against the joint without it, per condition."""
+    if "gear_erased_fraction" not in frame or not frame["gear_erased_fraction"].notna().any():
+        return []
+    return ["## What each method did with the gear's real torque", "",
+            "Every harmonic drive's transmission error puts real torque at the ripple's own orders "
+            "(docs/physics.md, \"Transmission error\"). `gear_erased_fraction`: the share of it a "
+            "method removed (0 kept, 1 erased; ripple left at orders 1 and 2 moves it on single "
+            "devices, so read the means). A torque controller needs the real torque and ranks by "
+            "`rms_error_nm` above; an application that wants the gear's torque gone ranks by "
+            "`rms_error_without_gear_nm`.", "",
+            "### `gear_erased_fraction` (mean over the scenarios, 95 % interval)", "",
+            condition_summary_markdown(frame, "gear_erased_fraction"), "",
+            "### `rms_error_without_gear_nm` (mean over the scenarios, 95 % interval)", "",
+            condition_summary_markdown(frame, "rms_error_without_gear_nm"), ""] + \
+        [f"- {s}" for s in condition_headline(frame, "rms_error_without_gear_nm")] + [""]
 
 
 def _condition_section(condition: str, rows, source: str) -> list[str]:
@@ -212,8 +239,12 @@ READING_SIMULATED = """## Reading these tables
 READING_RECORDED = """## Reading these tables
 
 - Every number comes from the recorded log named in the scenario column (`log:NAME`),
-  scored against its `torque_ref` column (and `torque_true` where the log has one); one log
-  is one device, so there are no intervals over devices.
+  scored against its `torque_ref` column where it has one (and `torque_true` where the log
+  has one); one log is one device, so there are no intervals over devices.
+- Every row also has the truth-free scores (`ripple_wg_nm`, `rest_std_nm`,
+  `strain_delay_ms`), computed from the estimate, the strain and the encoder alone; a log
+  without any reference is ranked by them. Each measures one symptom, not the error
+  (below, and `docs/metrics.md`, "Scores without ground truth").
 - The `calibration` column of `results.csv` says what each method was fitted on; `self`
   means the scored log itself, which is not a fair test of any method.
 - Timing columns depend on the machine and its load; compare methods within one run."""

@@ -32,8 +32,9 @@ CONDITIONS = {
     "aged": "months of use since calibration: ripple amplitudes, phases and bridge zero drifted",
     "re-assembled": "flexspline re-mounted or drive swapped: gauge errors (ripple, gain) redrawn",
     "realistic": "same session, but the joint has the physics no method models (gauge dynamics, "
-                 "non-affine and flank-dependent ripple, span drift, DAQ chain, encoder errors, "
-                 "stiffer loop), in its calibration log too",
+                 "non-affine, flank- and load-history-dependent ripple, ripple at orders no method "
+                 "models, span drift, DAQ chain, encoder errors; today's position loop), in its "
+                 "calibration log too",
 }
 DEFAULT_CONDITION = "same-session"
 #: Conditions that change the joint itself, not what happened after its calibration: its

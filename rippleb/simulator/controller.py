@@ -26,6 +26,7 @@ from rippleb.simulator import device as device_module
 from rippleb.simulator import joint
 from rippleb.simulator.encoder import IDEAL_PARAMS
 from rippleb.simulator.robot import LoadTable
+from rippleb.simulator.transmission import IDEAL as IDEAL_GEAR, TransmissionError
 
 #: Closed-loop bandwidth as a fraction of the locked-motor resonance: a collocated PD
 #: loop is kept well below the antiresonance it cannot see, a factor 3 is the usual margin.
@@ -94,7 +95,8 @@ def design_gains(spec: JointSpec, link_inertia: float, bandwidth_factor: float =
                  bandwidth=bandwidth, damping=DAMPING_RATIO, inertia=inertia, resonance=resonance)
 
 
-def motor_params(device, temperature_c: float, spec: JointSpec, encoder=None) -> dict:
+def motor_params(device, temperature_c: float, spec: JointSpec, encoder=None,
+                 gear: TransmissionError = IDEAL_GEAR) -> dict:
     """The device's motor and bearing friction, cogging and encoder (``encoder``: its
     :class:`~rippleb.simulator.encoder.EncoderErrors`, None for an ideal disc) as
     integrator parameters."""
@@ -112,7 +114,8 @@ def motor_params(device, temperature_c: float, spec: JointSpec, encoder=None) ->
         out_coulomb=out_coulomb, out_viscous=out_viscous * np.exp(-device_module.VISCOUS_TEMP_COEFF * dt),
         out_smoothing=device_module.OUTPUT_SIGN_SMOOTHING, encoder_zero=device.encoder_zero,
         gear_ratio=spec.gear_ratio, rotor_inertia=spec.rotor_inertia, torque_constant=spec.torque_constant,
-        counts_per_rev=spec.counts_per_rev, **(IDEAL_PARAMS if encoder is None else encoder.params()))
+        counts_per_rev=spec.counts_per_rev, **(IDEAL_PARAMS if encoder is None else encoder.params()),
+        **gear.params())
 
 
 def loop_params(spec: JointSpec, gains: Gains, table: LoadTable, *, controller=True, friction=True,
@@ -142,7 +145,8 @@ def reference(spec: JointSpec, t, q_d, qd_d, qdd_d, tau_ref, encoder_zero: float
 
 
 def initial_state(spec: JointSpec, gains: Gains, table: LoadTable, q_d0: float, qd_d0: float,
-                  external0: float, reference0, encoder_zero: float) -> np.ndarray:
+                  external0: float, reference0, encoder_zero: float,
+                  gear: TransmissionError = IDEAL_GEAR) -> np.ndarray:
     """``q, qd, theta_m, w_m, tau_s`` at the start: the link held by the shaft torque
     ``G(q) + tau_ext``, the motor off its reference by the position error whose ``K_p``
     makes up for the feedforward's model error (cogging and friction neglected)."""
@@ -152,26 +156,27 @@ def initial_state(spec: JointSpec, gains: Gains, table: LoadTable, q_d0: float, 
     for _ in range(3):
         tau = float(np.interp(q, table.angle, table.gravity)) + external0
         theta = theta_ref0 - (tau / N - torque_ff0) / gains.kp
-        q = (theta - encoder_zero) / N - float(joint.twist(tau))
+        q = (theta - encoder_zero) / N + float(gear.error(theta, N)) - float(joint.twist(tau))
     return np.array([q, qd_d0, theta, N * qd_d0, tau])
 
 
 def run(spec: JointSpec, device, temperature_c: float, table: LoadTable, gains: Gains, t, trajectory,
-        tau_ref, external, encoder=None, **switches) -> np.ndarray:
+        tau_ref, external, encoder=None, gear: TransmissionError = IDEAL_GEAR, **switches) -> np.ndarray:
     """Integrate the closed-loop joint over ``t``; rows ``joint.STATE``.
 
     ``trajectory`` is ``(q_d, qd_d, qdd_d)``, ``tau_ref`` the eq. (7) reference the
     controller feeds forward, ``external`` the true external torque; ``encoder`` the
-    errors of the encoder the controller reads (None: ideal); ``switches`` go to
+    errors of the encoder the controller reads (None: ideal), ``gear`` the drive's
+    transmission error (default: an ideal gear); ``switches`` go to
     :func:`loop_params` (``controller``, ``friction``, ``clamp_motor``, ``substeps``).
     """
     q_d, qd_d, qdd_d = trajectory
     ref = reference(spec, t, q_d, qd_d, qdd_d, tau_ref, device.encoder_zero)
-    params = joint.pack_params(**motor_params(device, temperature_c, spec, encoder),
+    params = joint.pack_params(**motor_params(device, temperature_c, spec, encoder, gear),
                                **loop_params(spec, gains, table, **switches))
     inputs = np.ascontiguousarray(np.vstack([external, ref]))
     state0 = initial_state(spec, gains, table, float(q_d[0]), float(qd_d[0]), float(external[0]),
-                           ref[:, 0], device.encoder_zero)
+                           ref[:, 0], device.encoder_zero, gear)
     out = np.empty((len(joint.STATE), len(t)))
     joint.integrate(params, table_rows(table), inputs, state0, out)
     return out

@@ -15,7 +15,10 @@ knob's size: a sweep moves one joint further along one direction.
 from __future__ import annotations
 
 import numpy as np
+from numba import types
 from scipy import signal
+
+from rippleb.dsp import F8, IN_F8, compiled
 
 from rippleb.scenario import REFERENCE_TEMPERATURE_C
 from rippleb.simulator.conditions import stream
@@ -28,6 +31,27 @@ GAUGE_MODE_DAMPING = 0.05
 #: other: the catalogue's lost-motion test torque, +-4 % of rated (Harmonic Drive
 #: catalogues measure lost motion at that torque: below it the teeth change contact side).
 FLANK_WIDTH = 0.04
+#: Ripple orders no method models (``mismatch.extra_orders``): an odd order, and the wave
+#: generator's flexible bearing's outer-race ball-pass order ``(z / 2)(1 - d/D)`` in wave-
+#: generator turns. **Estimate**: a size-25 wave-generator bearing has some 21 balls with
+#: ``d/D`` about 0.12 (thin-section bearings of that bore), so 9.24; order 3 stands for the
+#: odd orders an imperfect ellipse or gauge placement leaves (the paper's spectra show
+#: small odd lines).
+EXTRA_ORDERS = (3.0, 9.24)
+
+
+@compiled(types.void(IN_F8, types.float64, F8))
+def play(x, width, out):
+    """The play (backlash) operator of ``width``: ``out`` follows ``x`` only once ``x``
+    has moved ``width / 2`` away from it, so a rising and a falling ``x`` give two values."""
+    half = 0.5 * width
+    y = x[0]
+    for i in range(len(x)):
+        if x[i] > y + half:
+            y = x[i] - half
+        elif x[i] < y - half:
+            y = x[i] + half
+        out[i] = y
 
 
 def wave_ripple(device, knobs, wave_angle: np.ndarray, torque: np.ndarray, spec) -> np.ndarray:
@@ -58,6 +82,10 @@ def wave_ripple(device, knobs, wave_angle: np.ndarray, torque: np.ndarray, spec)
         return device.ripple(wave_angle, torque)
     rated = spec.rated_torque
     load = np.abs(torque)
+    if knobs.load_history_nm:   # the contact pattern settles with friction: it lags the load
+        followed = np.empty_like(load)
+        play(np.ascontiguousarray(load), knobs.load_history_nm, followed)
+        load = followed
     s = knobs.load_saturation
     if s:
         load = rated * np.tanh(s * load / rated) / np.tanh(s)
@@ -76,9 +104,20 @@ def wave_ripple(device, knobs, wave_angle: np.ndarray, torque: np.ndarray, spec)
             other = amplitude * ratio[i] * np.cos(angle + shift[i])
             term = positive * term + (1.0 - positive) * other
         out += term
+    if knobs.extra_orders:
+        out += extra_orders(device, knobs.extra_orders, wave_angle, load)
     if knobs.gauge_mode_hz:
         out = mode_filter(out, knobs.gauge_mode_hz, spec.fs)
     return out
+
+
+def extra_orders(device, scale: float, wave_angle: np.ndarray, load: np.ndarray) -> np.ndarray:
+    """Ripple [Nm] at :data:`EXTRA_ORDERS`, each ``scale`` x the device's order-8 amplitude
+    (base and load terms) with its own random phase (own stream)."""
+    i = device.ripple_orders.index(8)
+    amplitude = scale * (device.ripple_base[i] + device.ripple_load[i] * load)
+    phases = stream(device.seed, "extra-orders").uniform(0.0, 2.0 * np.pi, len(EXTRA_ORDERS))
+    return sum(amplitude * np.cos(order * wave_angle + phase) for order, phase in zip(EXTRA_ORDERS, phases))
 
 
 def flank_draws(seed: int, orders: int, sigma: float) -> tuple[np.ndarray, np.ndarray]:

@@ -9,8 +9,10 @@ drives the motor is :mod:`rippleb.simulator.controller`.
 The joint (``docs/physics.md``, "Joint dynamics and position controller")::
 
     link:          M(q) q'' + h(q) q'^2 + G(q) + F_out(q') + tau_ext(t) = tau_s
-    transmission:  tau_s = twist^-1(theta_m / N - q)
-    motor:         J_m theta_m'' = K_t i - tau_s / N - F_m(theta_m', tau_s, theta_m) - cogging(theta_m)
+    transmission:  tau_s = twist^-1(theta_m / N + e(theta_m) - q)
+    motor:         J_m theta_m'' = K_t i - tau_s (1/N + e'(theta_m)) - F_m(theta_m', tau_s, theta_m) - cogging(theta_m)
+
+``e`` is the gear's transmission error (:mod:`rippleb.simulator.transmission`).
 
 :func:`integrate` advances it on the DAQ grid with semi-implicit (symplectic) Euler
 substeps; both frictions are taken implicitly (a scalar safeguarded Newton solve per
@@ -96,10 +98,12 @@ PARAMS = ("dt", "substeps", "block", "gear_ratio", "rotor_inertia", "torque_cons
           "cogging", "cogging_order", "cogging_phase",
           "out_coulomb", "out_viscous", "out_smoothing",
           "table_start", "table_step", "encoder_zero", "controller", "friction", "clamp_motor",
-          "encoder_errors", "edge0", "edge1", "edge2", "edge3", "eccentricity", "eccentricity_phase")
+          "encoder_errors", "edge0", "edge1", "edge2", "edge3", "eccentricity", "eccentricity_phase",
+          "te2", "te2_phase", "te1", "te1_phase", "te_out", "te_out_phase")
 (DT, SUBSTEPS, BLOCK, GEAR, JM, KT, KP, KD, IMAX, CPR, VFILT, FC, FS, WS, FV, MU, R1, R2, PH1, PH2,
  CSCALE, VSCALE, EPS, COG, COGORD, COGPH, OC, OV, OEPS, TSTART, TSTEP, ZERO, CTRL, FRIC,
- CLAMP, ENCERR, EDGE0, EDGE1, EDGE2, EDGE3, ECC, ECCPH) = range(len(PARAMS))
+ CLAMP, ENCERR, EDGE0, EDGE1, EDGE2, EDGE3, ECC, ECCPH,
+ TE2, TE2PH, TE1, TE1PH, TEO, TEOPH) = range(len(PARAMS))
 #: Rows of the integrator's output: joint angle and velocity, motor angle and velocity,
 #: transmitted (shaft) torque and commanded current.
 STATE = ("q", "qd", "theta_m", "w_m", "tau_s", "current")
@@ -113,6 +117,18 @@ def pack_params(**values) -> np.ndarray:
     if missing:
         raise ValueError(f"integrator parameters missing: {sorted(missing)}")
     return np.array([float(values[name]) for name in PARAMS])
+
+
+@compiled(types.UniTuple(types.float64, 2)(IN_F8, types.float64))
+def transmission(P, th):
+    """The gear's transmission error ``e`` [rad] at wave-generator angle ``th`` and its
+    slope ``de/dth`` (:class:`rippleb.simulator.transmission.TransmissionError`)."""
+    out_angle = th / P[GEAR]
+    e = (P[TE2] * math.cos(2.0 * th + P[TE2PH]) + P[TE1] * math.cos(th + P[TE1PH])
+         + P[TEO] * math.cos(out_angle + P[TEOPH]))
+    slope = -(2.0 * P[TE2] * math.sin(2.0 * th + P[TE2PH]) + P[TE1] * math.sin(th + P[TE1PH])
+              + P[TEO] / P[GEAR] * math.sin(out_angle + P[TEOPH]))
+    return e, slope
 
 
 @compiled(types.float64(IN_F8, types.float64, types.float64))
@@ -220,7 +236,7 @@ def integrate(P, table, inputs, state0, out):
         Rows ``INPUTS`` on the DAQ grid; the external torque is held over a sample.
     state0
         ``q, qd, theta_m, w_m, tau_s`` at the first sample; ``theta_m`` is the absolute
-        motor angle (the deflection is ``(theta_m - encoder_zero) / N - q``) and
+        motor angle (the deflection is ``(theta_m - encoder_zero) / N + e(theta_m) - q``) and
         ``tau_s`` only the inverse twist's first guess.
     out
         ``(6, n)``, written.
@@ -244,7 +260,8 @@ def integrate(P, table, inputs, state0, out):
     last_angle = encoder_count(P, th, step_angle) * step_angle
     zero = P[ZERO]
     for k in range(n):
-        tau = torque_of_twist((th - zero) / N - q, tau)
+        e, slope = transmission(P, th)
+        tau = torque_of_twist((th - zero) / N + e - q, tau)
         if P[CTRL] != 0.0 and k % block == 0:
             angle = encoder_count(P, th, step_angle) * step_angle     # what the encoder counts
             if k > 0:
@@ -256,7 +273,8 @@ def integrate(P, table, inputs, state0, out):
         external = inputs[0, k]
         for s in range(sub):
             if s:
-                tau = torque_of_twist((th - zero) / N - q, tau)
+                e, slope = transmission(P, th)
+                tau = torque_of_twist((th - zero) / N + e - q, tau)
             M, hq, G = _load(table, P, q)
             link_force = tau - hq * qd * qd - G - external
             if friction_on:
@@ -266,7 +284,11 @@ def integrate(P, table, inputs, state0, out):
             if clamp:
                 w = 0.0
             else:
-                motor_force = P[KT] * current - tau / N - P[COG] * math.cos(P[COGORD] * th + P[COGPH])
+                # the shaft torque reaches the rotor through the same kinematics (virtual
+                # work): tau d(twist)/d(theta_m) = tau (1/N + e')
+                # (tau / N + tau e', not tau (1/N + e'): an ideal gear keeps its last bits)
+                motor_force = (P[KT] * current - tau / N - tau * slope
+                               - P[COG] * math.cos(P[COGORD] * th + P[COGPH]))
                 if friction_on:
                     w = _implicit_velocity(Jm / h, w, motor_force, P, motor_coulomb_scale(P, th, tau), tau, True)
                 else:

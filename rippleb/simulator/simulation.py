@@ -36,6 +36,7 @@ from rippleb.simulator.device import Device, check_seed
 from rippleb.simulator.encoder import EncoderErrors, counts, missed_counts
 from rippleb.simulator.joint import load_table
 from rippleb.simulator.sensors import current_sense, dropouts, encoder_faults, strain_bridge
+from rippleb.simulator.transmission import IDEAL as IDEAL_GEAR, TransmissionError
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,6 +59,11 @@ class Simulation:
         Per sample: inside the scenario's evaluation window.
     scenario, device
         What was simulated.
+    gear
+        The drive's transmission error (:mod:`rippleb.simulator.transmission`).
+    torque_gear
+        What that error adds to ``torque_true`` [Nm]: the real torque of this joint minus
+        that of the same joint with an ideal gear (zero when the error is off).
     """
 
     log: SensorLog
@@ -67,6 +73,8 @@ class Simulation:
     eval_mask: np.ndarray
     scenario: Scenario
     device: Device
+    gear: TransmissionError = IDEAL_GEAR
+    torque_gear: np.ndarray | None = None
 
 
 def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_CONDITION) -> Simulation:
@@ -100,9 +108,16 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     knobs = sc.unmodelled.resolve(realistic=session.realistic)
     errors = EncoderErrors.draw(seed, knobs, spec.counts_per_rev)
     gains = controller.design_gains(spec, float(np.mean(nominal.inertia)), knobs.bandwidth_factor)
-    state = controller.run(spec, device, sc.temperature_c, load_table(sc, q_d), gains, t, trajectory,
-                           tau_ref - _excitation(sc, t), sc.external_torque(t), encoder=errors)
-    q, qd, theta_m, _, tau_true, commanded = state
+    gear = TransmissionError.draw(seed, sc.transmission_error)
+    table = load_table(sc, q_d)
+    loop = (spec, device, sc.temperature_c, table, gains, t, trajectory, tau_ref - _excitation(sc, t),
+            sc.external_torque(t))
+    q, qd, theta_m, _, tau_true, commanded = controller.run(*loop, encoder=errors, gear=gear)
+    # What the gear's error adds to the real torque (the metrics' "erased" columns; never
+    # streamed to a method): this joint against the same joint with an ideal gear, each
+    # under its own loop (docs/metrics.md, "What a method erased", says what else the
+    # difference holds: the loop's response to the error, and encoder-edge jitter).
+    torque_gear = tau_true - controller.run(*loop, encoder=errors)[4] if gear.active else np.zeros(n)
 
     strain = strain_bridge(device, sc, t, theta_m, tau_true, noise, output_angle=q, knobs=knobs)
     current = current_sense(sc, commanded, device.current_offset, noise)
@@ -133,7 +148,7 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     start, stop = sc.evaluation
     return Simulation(log=log, moving=np.abs(qd_d) > 1e-12, wave_angle=theta_m,
                       joint_velocity=qd, eval_mask=(t >= start) & (t <= stop),
-                      scenario=sc, device=device)
+                      scenario=sc, device=device, gear=gear, torque_gear=torque_gear)
 
 
 def _excitation(sc: Scenario, t: np.ndarray) -> np.ndarray:

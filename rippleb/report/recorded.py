@@ -1,0 +1,192 @@
+"""The tables of a recorded log (``rippleb run --log``): ranked by what the log can score.
+
+A recording has no ``torque_true`` and often no ``torque_ref``. Its rows are ranked by the
+best score they hold (:func:`ranking_column`): the error against ``torque_true`` if any row
+has one, else against ``torque_ref``, else the truth-free :data:`TRUTH_FREE_RANKING`
+(``rippleb/truthfree.py``); every truth-free column is shown beside it with its own rank.
+One log is one device: no intervals. Every number comes from the rows.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rippleb.report.markdown import first_line, markdown, one_line, plural
+from rippleb.report.stats import method_order, scenario_order
+from rippleb.scorable import NO_REFERENCE
+from rippleb.report.tables import failed_markdown, is_recorded, summary_text, timing_cells
+
+#: The truth-free column a log without any reference is ranked by: the one whose ranking
+#: agreed best with the true ranking on simulated logs of every condition (docs/metrics.md,
+#: "How well the truth-free rankings agree with the truth").
+TRUTH_FREE_RANKING = "ripple_wg_nm"
+
+#: Every column a recorded log's table shows: (header, unit).
+RECORDED_COLUMNS = {
+    "rms_error_nm": ("RMS error against torque_true", "Nm"),
+    "rms_error_ref_nm": ("RMS error against torque_ref", "Nm"),
+    "ripple_wg_nm": ("ripple left at WG orders 2, 4, 8", "Nm"),
+    "rest_std_nm": ("spread at rest", "Nm"),
+    "strain_delay_ms": ("delay behind the strain", "ms"),
+}
+
+#: What the truth-free columns cannot tell; no number here, so nothing in it can go stale.
+TRUTH_FREE_CAVEATS = [
+    "`ripple_wg_nm` is whatever the estimate holds at orders 2, 4 and 8 of the encoder angle while "
+    "the joint turns: a real torque at those orders (a load that repeats with the motor angle) "
+    "counts as ripple, and an estimate that is wrong in any other way (gain, offset, drift, "
+    "noise at other orders) is not seen.",
+    "`rest_std_nm` is the estimate's spread while the encoder stands still: a load that changes at "
+    "rest counts against every method alike, and an estimate that is steady but wrong looks perfect; "
+    "a quiet estimate is a smoothed one, and on simulated logs its ranking ran against the true "
+    "error's (docs/metrics.md): read it as a noise figure, not as a ranking.",
+    "`strain_delay_ms` is the estimate's lag behind the strain in the band where the two are "
+    "coherent: the strain's own lag behind the torque is not in it, and a method that ignores "
+    "the strain (current-based) may lead (negative).",
+]
+
+#: Rows a recording's report ranks: ``ok`` ones, and those of a log without a reference
+#: (``no-reference``), whose truth-free scores still rank them.
+RANKABLE = ("ok", NO_REFERENCE)
+
+
+def rankable(frame):
+    """The rows of ``frame`` whose status is in :data:`RANKABLE`."""
+    return frame[frame["status"].isin(RANKABLE)]
+
+
+#: What a recorded log is ranked by, best first: the first of these that an ok row has. Not
+#: ``rest_std_nm``: its ranking ran against the true one (docs/metrics.md).
+RANKING_ORDER = ("rms_error_nm", "rms_error_ref_nm", TRUTH_FREE_RANKING, "strain_delay_ms")
+
+
+def ranking_column(frame) -> str:
+    """The column the rows of a recorded log are ranked by: the first of :data:`RANKING_ORDER`
+    that some ok row has a value in (:data:`TRUTH_FREE_RANKING` if none has)."""
+    ok = rankable(frame)
+    for column in RANKING_ORDER:
+        if column in ok and np.isfinite(ok[column].astype(float)).any():
+            return column
+    return TRUTH_FREE_RANKING
+
+
+def sort_key(values):
+    """What a column is ranked by: ``strain_delay_ms`` by its absolute value (a lead is no
+    better than a lag), the others as they are; lowest first."""
+    values = values.astype(float)
+    return values.abs() if values.name == "strain_delay_ms" else values
+
+
+def shown_columns(frame) -> list[str]:
+    """The columns of :data:`RECORDED_COLUMNS` that some ok row has a value in."""
+    ok = rankable(frame)
+    return [c for c in RECORDED_COLUMNS if c in ok and np.isfinite(ok[c].astype(float)).any()]
+
+
+def log_table(rows, column: str):
+    """One log's rankable rows (:data:`RANKABLE`) sorted by ``column`` (lowest first; methods without a value last),
+    with a rank per shown column (``strain_delay_ms`` by its absolute value: a lead is no
+    better than a lag)."""
+    ok = rankable(rows).copy()
+    for c in shown_columns(rows):
+        ok[f"rank:{c}"] = sort_key(ok[c]).rank(method="min")
+    ok["_key"] = sort_key(ok[column]) if column in ok else np.nan
+    ok = ok.sort_values(["_key", "method"], na_position="last").drop(columns="_key")
+    return ok.reset_index(drop=True)
+
+
+def _cell(value, rank) -> str:
+    if not np.isfinite(value):
+        return "n/a"
+    return f"{value:.3g}" + (f" ({int(rank)})" if np.isfinite(rank) else "")
+
+
+def log_markdown(rows) -> str:
+    """The table of one log: a line per method, best first by :func:`ranking_column`."""
+    column = ranking_column(rows)
+    table = log_table(rows, column)
+    columns = shown_columns(rows)
+    cost = {r.method: r.p50 for r in timing_cells(rows).itertuples()}
+    lines = []
+    for i, r in enumerate(table.to_dict("records"), start=1):
+        place = str(i) if np.isfinite(float(r.get(column, np.nan))) else "-"   # nothing to rank it by
+        lines.append([place, r["method"]] + [_cell(float(r[c]), r[f"rank:{c}"]) for c in columns]
+                     + [f"{cost[r['method']]:.3g}" if np.isfinite(cost.get(r["method"], np.nan)) else "n/a"])
+    heads = ["rank", "method"] + list(columns) + ["p50 [us]"]
+    return markdown(lines, heads) + f"\n\n{UNITS_NOTE}"
+
+
+#: Under each table: the units, kept out of the headers so the run summary fits a terminal.
+UNITS_NOTE = "Values in Nm (`strain_delay_ms` in ms), each with its rank in that column in brackets."
+
+
+def basis_sentence(column: str) -> str:
+    """Why the table is ranked by ``column``."""
+    if column == "rms_error_nm":
+        return "Ranked by `rms_error_nm`: the log has `torque_true`, so the error itself is known."
+    if column == "rms_error_ref_nm":
+        return ("Ranked by `rms_error_ref_nm`, the error against the log's `torque_ref` (a model torque, "
+                "not the torque itself: what the model leaves out counts as error).")
+    head = "The log has neither `torque_true` nor `torque_ref`: no error can be computed."
+    if column == TRUTH_FREE_RANKING:
+        return (f"{head} Ranked by `{column}`, the truth-free score whose ranking agreed best with the "
+                f"true one on simulated logs (docs/metrics.md).")
+    return (f"{head} No run of motion in one direction spans two motor revolutions, so there is no "
+            f"`{TRUTH_FREE_RANKING}`; ranked by the absolute `{column}`, whose ranking agreed only "
+            f"weakly with the true one on simulated logs (docs/metrics.md).")
+
+
+def leader_sentence(rows, column: str) -> str:
+    """Who ranks first by ``column``, and what share of ``raw``'s ripple each method removed."""
+    table = log_table(rows, column).dropna(subset=[column])
+    if table.empty:
+        return "No ok row has a value to rank by."
+    first = table.iloc[0]
+    text = f"`{first['method']}` ranks first by `{column}` ({first[column]:.3g} {RECORDED_COLUMNS[column][1]})"
+    raw = table[table["method"] == "raw"]
+    if "ripple_wg_nm" in table and len(raw) and np.isfinite(raw["ripple_wg_nm"].iloc[0]) \
+            and raw["ripple_wg_nm"].iloc[0] > 0:
+        base = float(raw["ripple_wg_nm"].iloc[0])
+        shares = [f"`{r.method}` {1 - r.ripple_wg_nm / base:.0%}" for r in table.itertuples()
+                  if r.method != "raw" and np.isfinite(r.ripple_wg_nm)]
+        text += (f". Of the ripple at WG orders 2, 4, 8 that `raw` (the calibrated strain) holds, "
+                 f"{base:.3g} Nm, each method removed: {', '.join(shares)}")
+    return text + "."
+
+
+def recorded_tables_markdown(frame) -> str:
+    """The README's tables for a recorded log: per log, the ranking table and its basis, what
+    the truth-free columns cannot tell, and the rows that did not finish ok."""
+    parts = []
+    for log in scenario_order(frame["scenario"].unique()):
+        rows = frame[frame["scenario"] == log]
+        column = ranking_column(rows)
+        parts += [f"## `{log}`: methods ranked by `{column}`", "", basis_sentence(column), "",
+                  log_markdown(rows) if len(rankable(rows)) else "(no rows to rank)", "",
+                  f"- {leader_sentence(rows, column)}", ""]
+    parts += ["### What the truth-free columns cannot tell", ""] + [f"- {c}" for c in TRUTH_FREE_CAVEATS] + [""]
+    parts += ["## Rows that did not finish ok", "", failed_markdown(frame)]
+    return "\n".join(parts)
+
+
+def recorded_summary_text(frame) -> str:
+    """What ``rippleb run --log`` prints when it ends: per log, the ranking table."""
+    parts = []
+    for log in scenario_order(frame["scenario"].unique()):
+        rows = frame[frame["scenario"] == log]
+        column = ranking_column(rows)
+        n_ok = len(rankable(rows))
+        parts += [f"{log}: {plural(n_ok, 'ranked row')} of {len(rows)}, ranked by {column}", ""]
+        parts += [log_markdown(rows) if n_ok else "(no rows to rank)", ""]
+    failed = frame[~frame["status"].isin(RANKABLE)]
+    for r in failed.itertuples():
+        parts.append(f"- {r.method} / {r.scenario}: {r.status}: {one_line(first_line(r.message))}")
+    return "\n".join(parts).rstrip()
+
+
+def run_summary(frame) -> str:
+    """The table ``rippleb run`` ends with: :func:`recorded_summary_text` for a recorded log,
+    :func:`rippleb.report.tables.summary_text` for simulated devices."""
+    if len(frame) and is_recorded(frame):
+        return recorded_summary_text(frame)
+    return summary_text(frame)

@@ -373,7 +373,10 @@ def test_the_walls_hold_as_root_and_on_dask(breaker_site, tmp_path, executor):
     _assert_walls_held(_found(run), run)
     rows = _rows(run)
     assert rows["raw"]["status"] == "ok" and rows["breaker"]["status"] == "error"
-    assert float(rows["raw"]["rms_error_nm"]) == pytest.approx(1.7996, abs=1e-3)   # raw's own, as in any run
+    import rippleb
+
+    clean = rippleb.run(["raw"], ["static-contact"], [0], progress=False)   # raw alone, no breaker beside it
+    assert float(rows["raw"]["rms_error_nm"]) == clean.rms_error_nm.iloc[0]
 
 
 @pytest.mark.slow

@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from test_integrity import HOSTILE, NAPPER, SLOW_IMPORT, _dist  # noqa: E402
+from test_integrity import HOSTILE, NAPPER, SLOW_IMPORT, _dist, napping  # noqa: E402
 from test_integrity_inputs import SCENARIO  # noqa: E402
 
 RUN = ["run", "--seeds", "1", "--jobs", "2", "--no-progress"]
@@ -235,10 +235,10 @@ def resume_environmental(c):
 def interrupted_early(c):
     args = [sys.executable, "-m", "rippleb", *RUN, "--methods", "napper,raw", "--scenarios", "static-contact",
             "--out", "out"]
-    proc = subprocess.Popen(args, env=c.env, cwd=c.dir, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+    proc = subprocess.Popen(args, env={**c.env, "HOSTILE_NAP": "1"}, cwd=c.dir, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
     deadline = time.monotonic() + 120
-    while not Path(c.env["HOSTILE_PIDS"] + ".napped").is_file() and time.monotonic() < deadline:
+    while not napping(Path(c.dir) / "out") and time.monotonic() < deadline:
         time.sleep(0.05)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)

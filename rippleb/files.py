@@ -29,3 +29,11 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         with contextlib.suppress(OSError):  # e.g. the parent is a regular file: no tmp exists
             tmp.unlink(missing_ok=True)
         raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None
+
+
+def open_appending(path: str | Path, encoding: str = "utf-8"):
+    """``path`` opened to append text (created if absent), never through a symbolic link:
+    a link put in place of a run directory's file must not lead rippleb's writes to the
+    file it names (issue 34). ``OSError`` (``ELOOP`` for a link) is the caller's."""
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+    return open(fd, "a", encoding=encoding)

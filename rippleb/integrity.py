@@ -12,7 +12,8 @@ that rippleb did not write, and ``--resume`` refuses a ``run.json`` changed sinc
   is loaded only after the fork server started, so no method's process inherits it, and
   a confined worker sees its directory covered. Its id (a hash) is recorded, not the key.
 * ``run.json`` carries ``integrity``: the key's id, a random nonce of the run and the MAC
-  of the rest of the file. A row's MAC covers the nonce and every non-empty cell as the
+  of the rest of the file; a ``run.json`` without it is not trusted (``--resume`` refuses,
+  ``report`` warns), or deleting the field would switch the check off. A row's MAC covers the nonce and every non-empty cell as the
   CSV holds it, so a row copied from another run, or edited in one cell, fails.
 * ``DIR/rows.mac``: one MAC per line, appended before its row's CSV line is (a run
   killed in between leaves a MAC without a row, never a row without its MAC).
@@ -133,17 +134,24 @@ def seal_config(config: dict, nonce: str | None = None) -> dict:
 
 
 def check_config(config: dict, path: Path) -> None:
-    """Raise :class:`InputError` if ``run.json`` was changed since rippleb wrote it; one
-    warning where it cannot be checked here (no integrity field, or another key)."""
+    """Raise :class:`InputError` if ``run.json`` was changed since rippleb wrote it or has no
+    integrity field; one warning where it cannot be checked here (another key)."""
     seal = config.get("integrity")
     if seal is None:
-        return   # written before rippleb kept MACs
+        raise InputError(f"{path}: {UNSEALED}; rippleb will not resume a run it cannot vouch for: start it "
+                         f"again with another --out")
     secret = key(create=False)
     if not _ours(seal, secret, path):
         return
     if not _config_intact(secret, config):
         raise InputError(f"{path}: changed since rippleb wrote it (its keyed hash does not match); "
                          f"rippleb will not resume a run it cannot vouch for: start it again with another --out")
+
+
+#: Why a run.json without its integrity field is not trusted: deleting the field must not
+#: be a way past the check (issue 34); only runs older than row MACs lack it honestly.
+UNSEALED = ("has no integrity field (deleted, or written before rippleb kept keyed hashes, or where no "
+            "key could be written)")
 
 
 def _ours(seal, secret: bytes | None, path: Path) -> bool:
@@ -201,7 +209,9 @@ class Ledger:
     def append(self, row: dict) -> None:
         if self.active:
             new = not self.path.is_file()
-            with open(self.path, "a", encoding="ascii") as fh:
+            from rippleb.files import open_appending
+
+            with open_appending(self.path, encoding="ascii") as fh:
                 fh.write((_LEDGER_HEADER.format(key=key_id(self._secret)) if new else "") + self.mac(row) + "\n")
 
     def rewrite(self, rows: list[dict]) -> None:
@@ -240,7 +250,8 @@ def verified_rows(run_dir: Path, rows: list[dict], results_path: Path) -> list[d
     config = _read_config(Path(run_dir))
     seal = config.get("integrity")
     if seal is None:
-        return rows   # a run from before MACs, or made where no key could be written
+        _warn_unsealed(Path(run_dir), config)
+        return rows
     secret = key(create=False)
     if not _ours(seal, secret, Path(run_dir) / "run.json"):
         return rows
@@ -263,3 +274,15 @@ def verified_rows(run_dir: Path, rows: list[dict], results_path: Path) -> list[d
                       f"{first.get('condition')}/seed {first.get('seed')}); --resume runs them again",
                       IntegrityWarning, stacklevel=3)
     return kept
+
+
+def _warn_unsealed(run_dir: Path, config: dict) -> None:
+    """One warning for a run directory whose rows cannot be verified because ``run.json``
+    lacks its integrity field, or is gone while the row MACs remain. A bare results file
+    (no run.json, no rows.mac: a published table, a file made by a script) is read as it is."""
+    if config:
+        warnings.warn(f"{run_dir / 'run.json'}: {UNSEALED}; its rows are not verified", IntegrityWarning,
+                      stacklevel=4)
+    elif (run_dir / LEDGER).exists() and not (run_dir / "run.json").exists():
+        warnings.warn(f"{run_dir}: holds {LEDGER} but no run.json (deleted?); its rows are not "
+                      f"verified", IntegrityWarning, stacklevel=4)

@@ -31,7 +31,9 @@ HOSTILE = textwrap.dedent('''
     def _cache_files():
         """Every cache file a plugin could find: the temporary directory, the run directory
         below the working directory, and the directories of its inherited file descriptors."""
-        found = glob.glob(os.path.join(tempfile.gettempdir(), "rippleb-cache-*", "*"))
+        tmp = tempfile.gettempdir()   # its scratch directory, two levels below the run's (issue 34)
+        found = [path for root in (tmp, os.path.dirname(os.path.dirname(tmp)))
+                 for path in glob.glob(os.path.join(root, "rippleb-cache-*", "*"))]
         found += glob.glob(os.path.join("*", ".cache", "*"))
         for fd in os.listdir("/proc/self/fd"):
             try:
@@ -120,7 +122,7 @@ HOSTILE = textwrap.dedent('''
                 os.setsid()
                 os.execvp("sleep", ["sleep", "988"])
             time.sleep(0.2)
-            open(os.environ["HOSTILE_PIDS"], "a").close()
+            print("spawned", flush=True)   # on its log: it may write no file outside its scratch directory
         def step(self, block):
             return block.strain * 0.0
 
@@ -155,17 +157,19 @@ HOSTILE = textwrap.dedent('''
         def step(self, block):
             return block.strain * 0.0
 ''')
-NAPPER = textwrap.dedent('''
+NAPPING = "napping"
+NAPPER = textwrap.dedent(f'''
     import os, time
     from rippleb import Method
+    NAPPING = {NAPPING!r}
 
     class Napper(Method):
-        """Sleeps in its first fit ever (to be interrupted), not in later ones."""
+        """Sleeps in its fit (to be interrupted) in a run started with HOSTILE_NAP set, and
+        says so on its log, the one file it may write (issue 34); not in a resumed run."""
         name = "napper"
         def fit(self, calibration):
-            marker = os.environ["HOSTILE_PIDS"] + ".napped"
-            if not os.path.exists(marker):
-                open(marker, "w").close()
+            if os.environ.get("HOSTILE_NAP"):
+                print(NAPPING, flush=True)
                 time.sleep(3600)
         def step(self, block):
             return block.strain * 0.0
@@ -184,6 +188,12 @@ def site(tmp_path_factory):
     _dist(site, "rippleb-exits", "rippleb_exits", EXITS, {"exits": "Anything"})
     _dist(site, "rippleb-napper", "rippleb_napper", NAPPER, {"napper": "Napper"})
     return site
+
+
+def napping(out) -> bool:
+    """Whether the napper's fit in run directory ``out`` is asleep (its log says so)."""
+    log = out / "logs" / "fit--napper--0.txt"
+    return log.is_file() and NAPPING in log.read_text()
 
 
 def _env(site, tmp):
@@ -234,7 +244,7 @@ def test_hostile_plugins_cannot_peek_escape_or_kill(site, tmp_path):
     # the truth never reached a method: the peeker found none and scores like zeros (= the torque)
     assert rows.loc["peeker", "rms_error_nm"] > 0.1
     time.sleep(0.5)
-    assert (tmp_path / "pids").is_file()        # the spawner did start its processes
+    assert "spawned" in (tmp_path / "hostile" / "logs" / "fit--spawner--0.txt").read_text()   # it did start them
     assert _spawned() == []
     assert not list(tmp_path.glob("rippleb-cache-*"))        # the cache went with the run
 
@@ -255,13 +265,15 @@ def test_a_plugin_cannot_rewrite_the_cache(site, tmp_path):
 
 def test_where_the_cache_is_writable_a_rewrite_fails_the_rows_it_tampered(tmp_path, monkeypatch,
                                                                             register_methods):
-    """Without a mount namespace (a kernel that refuses it) the worker can write the cache;
-    the SHA-256 of every cached file, taken before any method ran, still catches it."""
-    from rippleb.engine import isolation
+    """Without a mount namespace and without Landlock (a kernel that refuses both) the worker
+    can write the cache; the SHA-256 of every cached file, taken before any method ran, still
+    catches it. (With Landlock alone the rewrite is refused: tests/test_hostile.py.)"""
+    from rippleb.engine import isolation, sandbox
 
     namespace = {}
     exec(HOSTILE, namespace)
     monkeypatch.setattr(isolation, "NAMESPACE_CHOICES", isolation.NAMESPACE_CHOICES[1:])  # no mount namespace
+    monkeypatch.setattr(sandbox, "_landlock", lambda scratch: False)                       # nor Landlock
     (tmp_path / "tmp").mkdir()
     monkeypatch.setenv("TMPDIR", str(tmp_path / "tmp"))   # the forger rewrites this run's cache only
     monkeypatch.setattr("tempfile.tempdir", None)
@@ -302,8 +314,9 @@ def test_a_running_directory_is_locked_and_an_interrupted_one_resumable(site, tm
     args = [sys.executable, "-m", "rippleb", "run", "--methods", "napper,raw", "--scenarios", "static-contact",
             "--seeds", "1", "--jobs", "1", "--no-progress", "--out", str(out)]
     env = _env(site, tmp_path)
-    runner = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    while not (tmp_path / "pids.napped").is_file():    # the napper's fit is running: no row finished
+    runner = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                              env={**env, "HOSTILE_NAP": "1"})
+    while not napping(out):    # the napper's fit is running: no row finished
         assert runner.poll() is None
         time.sleep(0.02)
     second = subprocess.run(args[:-2] + ["--resume", str(out)], capture_output=True, text=True,

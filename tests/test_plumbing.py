@@ -4,7 +4,7 @@
 can see in ``/proc``, every file descriptor of theirs it can open for writing (the
 keeper's control pipe, the runner's terminal and results), the terminals in ``/dev/pts``,
 files in the run directory and the cache, and forged summary lines on its own output. It
-writes what it achieved to ``PROBE_OUT`` (outside the run directory). Through the real CLI
+prints what it achieved on its own log (the one place it may write). Through the real CLI
 the worker is confined (a /proc of its own, terminals hidden, run directory and cache
 read-only); where the kernel refuses a mount namespace, the keeper and the runner are
 still not dumpable, so their descriptors stay closed to it.
@@ -81,8 +81,7 @@ PROBER = textwrap.dedent('''
             found["key_bytes"] = type(exc).__name__
         print(FORGED)
         print(FORGED, file=sys.stderr)
-        with open(os.environ["PROBE_OUT"] + "." + os.urandom(4).hex(), "w") as fh:
-            json.dump(found, fh)
+        print("FOUND " + json.dumps(found), flush=True)   # its log: it may write nowhere else (issue 34)
 
     class Prober(Method):
         """Probes the runner's plumbing, then returns zeros."""
@@ -94,8 +93,9 @@ PROBER = textwrap.dedent('''
 ''')
 
 
-def _reports(tmp_path):
-    return [json.loads(p.read_text()) for p in tmp_path.glob("found.*")]
+def _reports(run_dir):
+    return [json.loads(line[len("FOUND "):]) for p in sorted((run_dir / "logs").glob("prober--*"))
+            for line in p.read_text().splitlines() if line.startswith("FOUND ")]
 
 
 def _assert_nothing_reached(found, run_dir):
@@ -118,14 +118,14 @@ def test_a_confined_worker_sees_nothing_of_the_run(site, tmp_path):
     and the cache read-only; its forged summary lines end in its own log."""
     run_dir = tmp_path / "run"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]),
-           "TMPDIR": str(tmp_path), "PROBE_OUT": str(tmp_path / "found"), "PROBE_RUN_DIR": str(run_dir),
+           "TMPDIR": str(tmp_path), "PROBE_RUN_DIR": str(run_dir),
            "PROBE_RUNNER": "0", "RIPPLEB_KEY_FILE": str(tmp_path / "key")}
     proc = subprocess.Popen([sys.executable, "-m", "rippleb", "run", "--methods", "prober,raw", "--scenarios",
                              "static-contact", "--seeds", "1", "--jobs", "2", "--no-progress", "--out", str(run_dir)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     out, err = proc.communicate(timeout=300)
     assert proc.returncode == 0, err
-    (found,) = _reports(tmp_path)
+    (found,) = _reports(run_dir)
     assert found["visible"] == [1], found["visible"]   # PID 1 of its namespace, alone
     assert found["opened"] == []
     assert found["terminals"] == {}
@@ -148,7 +148,7 @@ def test_without_a_mount_namespace_the_plumbing_stays_closed(tmp_path, monkeypat
     exec(PROBER, namespace)
     monkeypatch.setattr(isolation, "NAMESPACE_CHOICES", isolation.NAMESPACE_CHOICES[1:])  # no mount namespace
     run_dir = tmp_path / "run"
-    for name, value in {"PROBE_OUT": tmp_path / "found", "PROBE_RUN_DIR": run_dir, "PROBE_RUNNER": os.getpid(),
+    for name, value in {"PROBE_RUN_DIR": run_dir, "PROBE_RUNNER": os.getpid(),
                         "TMPDIR": tmp_path}.items():
         monkeypatch.setenv(name, str(value))
     monkeypatch.setattr("tempfile.tempdir", None)
@@ -156,7 +156,7 @@ def test_without_a_mount_namespace_the_plumbing_stays_closed(tmp_path, monkeypat
     frame = rippleb.run(methods="prober,raw", scenarios="static-contact", seeds=1, jobs=2, out=run_dir,
                         progress=False)
     assert (frame.status == "ok").all(), frame.message.tolist()
-    (found,) = _reports(tmp_path)
+    (found,) = _reports(run_dir)
     assert len(found["visible"]) > 1                   # the host's /proc: this is the weaker case
     rippleb_fds = [entry for entry in found["opened"] if entry[3]]
     assert rippleb_fds == [], rippleb_fds
@@ -187,16 +187,22 @@ def _write_into_keeper(garbage: bytes) -> bytes:
 
 
 @pytest.mark.parametrize("garbage", [b"not a pid\n", b"4242 1\n0\n", b"1 1\n" * 3])
-def test_garbage_in_the_control_pipe_ends_that_job_only(monkeypatch, garbage):
-    """Where the worker can reach its keeper's pipes (no namespaces, running as root: the
-    issue's attack, which crashed the run or defeated --timeout), what it writes ends its
-    own job as ``garbled``, never the pool; a plain job beside it is done."""
+@pytest.mark.parametrize("sandbox", [True, False])
+def test_garbage_in_the_control_pipe_ends_that_job_only(monkeypatch, garbage, sandbox):
+    """Where the worker can reach its keeper's pipes (no namespaces, running as root, and no
+    sandbox to drop its capabilities: the issue's attack, which crashed the run or defeated
+    --timeout), what it writes ends its own job as ``garbled``, never the pool; a plain job
+    beside it is done. With the sandbox (issue 34) a root worker holds no capability and
+    opens nothing, as an unprivileged one."""
     import functools
 
     from rippleb.engine import isolation
+    from rippleb.engine import sandbox as walls
     from rippleb.engine.pool import Pool
 
     monkeypatch.setattr(isolation, "NAMESPACE_CHOICES", ())   # the kernel refuses namespaces
+    if not sandbox:
+        monkeypatch.setattr(walls, "lock_down", lambda *args, **kwargs: ["a sandbox (switched off)"])
     pool = Pool(2)
     pool.submit("attacker", functools.partial(_write_into_keeper, garbage), timeout=30, confine=())
     pool.submit("plain", lambda: b"fine", timeout=30)
@@ -204,7 +210,7 @@ def test_garbage_in_the_control_pipe_ends_that_job_only(monkeypatch, garbage):
     while pool.busy:
         finished.update({f.key: f for f in pool.wait()})
     assert finished["plain"].kind == "done" and finished["plain"].value == b"fine"
-    if os.geteuid() == 0:
+    if os.geteuid() == 0 and not sandbox:
         assert finished["attacker"].kind == "garbled", finished["attacker"]
     else:   # the keeper is not dumpable: an unprivileged worker cannot open its pipes
         assert finished["attacker"] == finished["attacker"].__class__("attacker", "done", b"wrote 0",

@@ -130,9 +130,11 @@ def test_an_interrupted_sealed_run_keeps_its_salt_and_resumes_with_it(site, tmp_
 
     args = [sys.executable, "-m", "rippleb", "run", "--methods", "napper,raw", "--scenarios", "static-contact",
             "--seeds", "1", "--jobs", "1", "--no-progress", "--out", "run", "--sealed", "salt"]
+    from test_integrity import napping
+
     runner = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                              env=_env(site, tmp_path), cwd=tmp_path)
-    while not (tmp_path / "pids.napped").is_file():    # the napper's fit is running
+                              env={**_env(site, tmp_path), "HOSTILE_NAP": "1"}, cwd=tmp_path)
+    while not napping(tmp_path / "run"):    # the napper's fit is running
         assert runner.poll() is None
         assert not (tmp_path / "salt").exists()         # no file holds the salt while methods run
         time.sleep(0.02)
@@ -247,7 +249,12 @@ def _reachable_files():
 
 def _seek(tmp_path, monkeypatch, register_methods, seeds: int):
     """A sealed run of the seeker; returns the salt, its device seeds and the seekers' reports."""
+    from rippleb.engine import sandbox
+
     keep = (DECOY_BYTES, DECOY_INT)  # noqa: F841 - alive in this process when it forks the server
+    # Landlock off, so the seeker can write its (large) report outside its scratch directory:
+    # it changes nothing in memory, the environment or what files exist, which it searches.
+    monkeypatch.setattr(sandbox, "_landlock", lambda scratch: True)
     monkeypatch.setenv("SEEKER_OUT", str(tmp_path / "found"))
     monkeypatch.setenv("SEEKER_DIRS", os.pathsep.join([str(tmp_path / "run"), str(tmp_path / "tmp")]))
     (tmp_path / "tmp").mkdir()

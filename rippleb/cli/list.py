@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from rippleb.cli.options import limit
 from rippleb.errors import RipplebError
+from rippleb.printable import escaped
 from rippleb.method import first_line
 
 PLUGIN_IMPORT_TIMEOUT_S = 20.0
@@ -44,21 +45,21 @@ def cmd_list(args) -> int:
         entry = registry.entries[name]
         error = entry.error or errors.get(name)
         if error:
-            print(f"  {name:<28} {'broken':<10} {entry.source}  {error}")
+            print(f"  {name:<28} {'broken':<10} {entry.source}  {escaped(error)}")
             continue
         # a built-in's docstring is read from its source: importing every method family
         # (numba kernels compiled on a fresh install) would make `list` take seconds
         about = (entry.description or first_line(entry.doc)) if entry.origin == "builtin" \
             else docs.get(name, "")
-        print(_fit(f"  {name:<28} {entry.origin:<10} {about or entry.source}"))
+        print(_fit(f"  {name:<28} {entry.origin:<10} {escaped(about or entry.source)}"))
     for module, error in sorted(registry.broken_modules.items()):
-        print(f"  {'?':<28} {'broken':<8} {module}  {error}")
+        print(f"  {'?':<28} {'broken':<8} {module}  {escaped(error)}")
     print("scenarios:")
     for name in builtin_scenarios():
         try:
             scenario = load_scenario(name)
         except RipplebError as exc:
-            print(f"  {name:<28} broken      {exc}")
+            print(f"  {name:<28} broken      {escaped(exc)}")
             continue
         scored = "scored" if scenario.scored else "not scored"
         print(_fit(f"  {name:<28} {scored:<10} {first_sentence(scenario.description)}"))

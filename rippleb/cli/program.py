@@ -28,6 +28,7 @@ from rippleb.cli.run import add_run
 from rippleb.cli.simulate import add_simulate
 from rippleb.cli.sweep import add_sweep
 from rippleb.errors import RipplebError
+from rippleb.printable import escaped
 
 EPILOG = "Run 'rippleb COMMAND --help' for the options of one command."
 
@@ -74,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
             if args is not None and args.debug:
                 raise
             kept = _interrupted(args) if getattr(exc, "resumable", False) else ""  # a lost scheduler
-            print(f"rippleb: error: {exc}{kept}", file=sys.stderr)
+            print(f"rippleb: error: {escaped(exc)}{kept}", file=sys.stderr)
             return 2
         except BrokenPipeError:
             # the reader went away (`rippleb list | head`): stop quietly, like any Unix filter
@@ -124,7 +125,7 @@ def _warnings_as_lines():
     from rippleb.engine.results import RunWarning
 
     def show(message, category, *args, **kwargs):
-        print(f"rippleb: warning: {message}", file=sys.stderr)
+        print(f"rippleb: warning: {escaped(message)}", file=sys.stderr)
     with warnings.catch_warnings():
         warnings.simplefilter("always", RunWarning)
         warnings.showwarning = show

@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 from rippleb.errors import InputError
+from rippleb.printable import escaped
 
 
 def add_report(sub) -> None:
@@ -47,7 +48,7 @@ def cmd_report(args) -> int:
                      argv=args.argv, published=args.published, html=args.html,
                      figure_format=args.format, speed_seeds=seeds)
     for warning in written["warnings"]:
-        print(f"rippleb: warning: {warning}", file=sys.stderr)
+        print(f"rippleb: warning: {escaped(warning)}", file=sys.stderr)
     print(f"wrote {written['readme']}, {written['csv']}, {written['provenance']}"
           + (f" and {len(written['figures'])} figures in {written['readme'].parent / 'figures'}"
              if written["figures"] else ""))

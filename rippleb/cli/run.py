@@ -14,6 +14,7 @@ from pathlib import Path
 
 from rippleb.cli.options import add_executor_options, add_seal_options, check_run_options, executor, limit
 from rippleb.errors import InputError
+from rippleb.printable import escaped
 
 
 def add_run(sub) -> None:
@@ -225,7 +226,7 @@ def report_broken_plugins(frame) -> int:
         messages = rows["message"].astype(str)
         failed = messages[messages.str.startswith("PluginError: ")]
         if len(failed) == len(rows):
-            print(f"rippleb: error: {failed.iloc[0][len('PluginError: '):]}", file=sys.stderr)
+            print(f"rippleb: error: {escaped(failed.iloc[0][len('PluginError: '):])}", file=sys.stderr)
             broken += 1
     return 1 if broken else 0
 

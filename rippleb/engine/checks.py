@@ -26,13 +26,24 @@ MIN_CALIBRATION_S = 1.0
 MIN_SCORED_S = 2 * MAX_DELAY_S
 
 
+#: The largest ``--memory-limit`` [MB] a worker can be held to: 128 TiB, the whole address
+#: space of a process on x86-64 Linux (47 bits). A larger cap limits nothing, and far larger
+#: ones (1e13 MB) overflow the kernel's 64-bit ``RLIMIT_AS``, which every job then failed
+#: on (issue 34: a run of `error` rows instead of one line).
+MAX_MEMORY_MB = 2.0**27
+
+
 def check_options(*, jobs, timeout, memory_mb) -> None:
-    """Refuse a job count below 1, and a negative or non-finite timeout or memory limit."""
+    """Refuse a job count below 1, a negative or non-finite timeout or memory limit, and
+    a memory limit above :data:`MAX_MEMORY_MB`."""
     if isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1:
         raise InputError(f"--jobs must be a whole number of at least 1, got {jobs!r}")
     for option, value, unit in (("--timeout", timeout, "seconds"), ("--memory-limit", memory_mb, "MB")):
         if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
             raise InputError(f"{option} must be a positive number of {unit} (0 for no limit), got {value!r}")
+    if memory_mb is not None and memory_mb > MAX_MEMORY_MB:
+        raise InputError(f"--memory-limit {memory_mb:g} MB is more than the {MAX_MEMORY_MB:.0f} MB (128 TiB) "
+                         f"address space of a process: the kernel cannot hold a job to it; give 0 for no limit")
 
 
 def check_scenario(scenario) -> None:

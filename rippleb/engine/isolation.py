@@ -27,6 +27,7 @@ import os
 import select
 import signal
 import time
+from dataclasses import dataclass
 
 CLONE_NEWNS = 0x00020000
 CLONE_NEWUSER = 0x10000000
@@ -41,23 +42,26 @@ MS_RELATIME = 1 << 21
 #: Where the terminals are: hidden from a method, which could otherwise write to rippleb's
 #: own terminal by opening its pseudo-terminal device (same user, same permissions).
 TERMINALS = "/dev/pts"
+#: A method's scratch directory: a tmpfs of its own, at most 1 GiB (its pages are memory
+#: that ``--memory-limit``'s address-space cap does not count).
+SCRATCH_OPTIONS = "size=1g,mode=0700"
 
 
 @functools.cache
-def _libc():
+def libc():
     # Loaded once, in the runner: a forked keeper and worker inherit it instead of each
     # loading it again (a measurable share of a short job's start).
     return ctypes.CDLL(None, use_errno=True)
 
 
 with contextlib.suppress(OSError, TypeError):  # not a POSIX C library: the calls below say so
-    _libc()
+    libc()
 
 
 def become_subreaper() -> bool:
     """Make orphaned descendants re-parent to this process; False where unsupported."""
     try:
-        return _libc().prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) == 0
+        return libc().prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) == 0
     except (OSError, AttributeError):
         return False
 
@@ -65,7 +69,7 @@ def become_subreaper() -> bool:
 def die_with_parent() -> None:
     """Ask the kernel to SIGKILL this process when its parent (the keeper) dies."""
     with contextlib.suppress(OSError, AttributeError):
-        _libc().prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        libc().prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
 
 
 #: What :func:`new_namespaces` asks for, best first: ``(unshare flags, (pid, mount))``.
@@ -86,21 +90,34 @@ def new_namespaces() -> tuple[bool, bool]:
     ids = os.getuid(), os.getgid()   # read before: inside an unmapped namespace they are 65534
     for flags, granted in NAMESPACE_CHOICES:
         try:
-            if _libc().unshare(flags) == 0:
-                _map_ids(*ids)
+            if libc().unshare(flags) == 0:
+                map_ids(*ids)
                 return granted
         except (OSError, AttributeError):
             break
     return False, False
 
 
-def _map_ids(uid: int, gid: int) -> None:
+def map_ids(uid: int, gid: int) -> None:
+    """Map this process's user and group ids onto themselves in its new user namespace.
+
+    A process that is not dumpable has its ``/proc/self`` files owned by root, which an
+    unprivileged user's new namespace cannot write; so it is dumpable for these writes
+    (as an unprivileged user the ids stayed unmapped, and a second, nested namespace,
+    which needs mapped ids, was refused: issue 34). Nothing can name it meanwhile: its
+    jobs run in PID namespaces of their own."""
+    was = libc().prctl(PR_GET_DUMPABLE, 0, 0, 0, 0)
+    if was == 0:
+        dumpable_again()
     try:
         _write("/proc/self/setgroups", "deny")
         _write("/proc/self/uid_map", f"{uid} {uid} 1")
         _write("/proc/self/gid_map", f"{gid} {gid} 1")
     except OSError:
         pass  # unmapped ids still work for file access under the caller's credentials
+    finally:
+        if was == 0:
+            not_dumpable()
 
 
 @contextlib.contextmanager
@@ -109,7 +126,7 @@ def undumpable():
     a run's jobs, of the same user, can then not open the runner's descriptors (its
     terminal, its results) nor read its memory (the truths, a sealed run's salt)."""
     try:
-        was = _libc().prctl(PR_GET_DUMPABLE, 0, 0, 0, 0)
+        was = libc().prctl(PR_GET_DUMPABLE, 0, 0, 0, 0)
     except (OSError, AttributeError):
         was = -1
     not_dumpable()
@@ -118,13 +135,13 @@ def undumpable():
     finally:
         if was > 0:
             with contextlib.suppress(OSError, AttributeError):
-                _libc().prctl(PR_SET_DUMPABLE, was, 0, 0, 0)
+                libc().prctl(PR_SET_DUMPABLE, was, 0, 0, 0)
 
 
 def dumpable_again() -> None:
     """Undo :func:`not_dumpable` in this process (a confined worker, seen by no one)."""
     with contextlib.suppress(OSError, AttributeError):
-        _libc().prctl(PR_SET_DUMPABLE, 1, 0, 0, 0)
+        libc().prctl(PR_SET_DUMPABLE, 1, 0, 0, 0)
 
 
 def not_dumpable() -> None:
@@ -134,15 +151,43 @@ def not_dumpable() -> None:
     terminal and results). A method's worker never holds that capability over its
     keeper: its user namespace is the keeper's child."""
     with contextlib.suppress(OSError, AttributeError):
-        _libc().prctl(PR_SET_DUMPABLE, 0, 0, 0, 0)
+        libc().prctl(PR_SET_DUMPABLE, 0, 0, 0, 0)
 
 
-def confine_files(read_only, hidden_files=()) -> list[str]:
+@dataclass(frozen=True)
+class Confinement:
+    """What a method's worker must not touch.
+
+    Parameters
+    ----------
+    read_only
+        Directories it sees read-only beyond what Landlock denies (the run directory, the
+        cache): a mount holds even where Landlock is missing.
+    hidden
+        Files covered by ``/dev/null`` (rippleb's key, a sealed run's salt file).
+    scratch_in
+        The directory that holds the job's scratch directory (None: the system's
+        temporary directory).
+    """
+
+    read_only: tuple[str, ...] = ()
+    hidden: tuple[str, ...] = ()
+    scratch_in: str | None = None
+
+    @classmethod
+    def of(cls, read_only, hidden, scratch_in) -> "Confinement":
+        """From paths (None where there is none), as strings: it is pickled to the fork server."""
+        return cls(tuple(str(p) for p in read_only if p), tuple(str(p) for p in hidden if p),
+                   str(scratch_in) if scratch_in else None)
+
+
+def confine_files(read_only, hidden_files=(), scratch=None) -> list[str]:
     """In a worker that is PID 1 of its own PID and mount namespaces: a /proc of its own
     namespace (the host's processes, its keeper's and the runner's descriptors out of
     sight), the terminals hidden (:data:`TERMINALS`), each existing directory of
-    ``read_only`` (the run directory, the cache) mounted read-only over itself, and each
-    existing file of ``hidden_files`` (rippleb's key) covered by ``/dev/null``.
+    ``read_only`` (the run directory, the cache) mounted read-only over itself, each
+    existing file of ``hidden_files`` (rippleb's key) covered by ``/dev/null``, and a
+    private tmpfs over ``scratch`` (:data:`SCRATCH_OPTIONS`), gone with the worker.
 
     Only this worker's view changes: its mount namespace is private (``MS_PRIVATE``), so
     nothing propagates back. Files it had opened before keep their access (its output
@@ -162,6 +207,8 @@ def confine_files(read_only, hidden_files=()) -> list[str]:
     for path in map(str, hidden_files):
         if os.path.isfile(path) and _mount(os.devnull, path, None, MS_BIND) != 0:
             missing.append(f"{path} hidden")
+    if scratch is not None and _mount("tmpfs", scratch, "tmpfs", MS_NOSUID | MS_NODEV, SCRATCH_OPTIONS) != 0:
+        missing.append("a scratch directory of its own")
     return missing
 
 
@@ -178,7 +225,7 @@ def _mount(source, target, fstype, flags: int, data: str | None = None) -> int:
     def arg(text):
         return None if text is None else os.fsencode(text)
     try:
-        return _libc().mount(arg(source), arg(target), arg(fstype), flags, arg(data))
+        return libc().mount(arg(source), arg(target), arg(fstype), flags, arg(data))
     except (OSError, AttributeError, ctypes.ArgumentError):
         return -1
 

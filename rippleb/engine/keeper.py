@@ -3,8 +3,9 @@
 :class:`rippleb.engine.pool.Pool` (or the fork server, :mod:`rippleb.engine.forkserver`) forks a keeper
 per job; the keeper takes a new session and PID namespace, becomes a child subreaper and
 forks the worker, which runs the job with a memory limit, with every inherited file
-descriptor closed but its result pipe, and with its output going to a file
-(:mod:`rippleb.engine.isolation` says why each step). The keeper reports the worker's PID and,
+descriptor closed but its result pipe, and with its output going through a pipe into a
+log the keeper opened and bounds (:mod:`rippleb.engine.joblog`; :mod:`rippleb.engine.isolation`
+says why each step). The keeper reports the worker's PID and,
 when it has ended and everything it started is gone, its exit code, on the control pipe.
 
 The keeper never waits blindly: it watches its end of the control pipe while it waits for
@@ -21,12 +22,15 @@ import gc
 import os
 import resource
 import select
+import shutil
 import signal
 import sys
+import tempfile
 import traceback
 
 from rippleb import integrity
-from rippleb.engine import isolation
+from rippleb.engine import isolation, sandbox
+from rippleb.engine.joblog import JobLog
 from rippleb.registry import one_line
 
 
@@ -34,8 +38,9 @@ def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output, confine=None) -> N
     """rippleb's own process between the runner and a job: session, namespaces, cleanup.
     Runs ``fn()`` in a worker it forks; never returns.
 
-    ``confine`` is None for rippleb's own jobs (simulations), else the directories a
-    method's worker must not write (:func:`rippleb.engine.isolation.confine_files`)."""
+    ``confine`` is None for rippleb's own jobs (simulations), else what a method's worker
+    must not touch (:class:`rippleb.engine.isolation.Confinement`); such a worker gets a
+    scratch directory of its own, the one place it may write, removed when it ends."""
     try:
         # First: Ctrl-C reaches the runner's whole process group, and what is inherited
         # from the runner until here is its handler (the runner decides what a signal ends).
@@ -45,8 +50,13 @@ def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output, confine=None) -> N
         os.setsid()
         isolation.close_fds_except(result_w, ctrl_w)
         isolation.not_dumpable()   # its descriptors (the control pipe) out of the worker's reach
+        log = JobLog(output)
+        log.open()   # before the worker can change what the run directory's paths lead to
+        confine = None if confine is None else _as_confinement(confine)
         isolated, own_mounts = isolation.new_namespaces()
+        scratch, made = _scratch(confine, isolated and own_mounts)
         isolation.become_subreaper()
+        go_r, go_w = os.pipe()   # the worker starts once the keeper has named it (below)
         worker = os.fork()
         if worker == 0:
             # Its own process group: a worker that signals "its" group (killpg(0, ...), or
@@ -54,41 +64,57 @@ def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output, confine=None) -> N
             # must not reach the keeper, whose death would lose the row it reports.
             os.setpgid(0, 0)
             os.close(ctrl_w)
-            _worker(fn, result_w, memory_mb, output, confine if isolated and own_mounts else None,
-                    confine is not None)  # never returns
+            os.close(go_w)
+            log.give_to_worker()
+            os.read(go_r, 1)   # a job that writes into the control pipe must not get there first
+            os.close(go_r)
+            _worker(fn, result_w, memory_mb, confine, scratch, isolated and own_mounts)  # never returns
         os.close(result_w)
+        os.close(log.write_fd)
         _write_all(ctrl_w, f"{worker} {int(isolated)}\n".encode())
-        status = _wait_worker(worker, ctrl_w)
+        os.close(go_r)
+        os.close(go_w)   # the worker's read returns: it may start
+        status = _wait_worker(worker, ctrl_w, log)
         if isolated:  # the kernel ended the namespace with its first process: nothing left to hunt
             isolation.reap_exited()
         else:
             isolation.end_descendants()
+        log.close()   # the log is whole before the runner hears the job ended
+        if made:
+            _remove(scratch)
         _write_all(ctrl_w, f"{os.waitstatus_to_exitcode(status)}\n".encode())
     finally:
         os._exit(0)
 
 
-def _wait_worker(worker: int, ctrl_w: int) -> int:
-    """Wait for ``worker`` to end and return its wait status; end it at once if the runner
-    closes its end of the control pipe (``POLLERR`` on ours), i.e. no one will read what
-    the worker sends, nor wait for it.
+def _wait_worker(worker: int, ctrl_w: int, log: JobLog) -> int:
+    """Wait for ``worker`` to end and return its wait status, copying its output into
+    ``log`` meanwhile; end it at once if the runner closes its end of the control pipe
+    (``POLLERR`` on ours), i.e. no one will read what the worker sends, nor wait for it.
 
-    Where the kernel has no process file descriptors (``pidfd_open``, Linux 5.3) this is a
-    plain ``waitpid``: the runner and the fork server still end the keeper themselves.
+    Where the kernel has no process file descriptors (``pidfd_open``, Linux 5.3) the
+    output is copied until the worker closes it, then the worker is waited for plainly:
+    the runner and the fork server still end the keeper themselves.
     """
     try:
         pidfd = os.pidfd_open(worker)
     except (AttributeError, OSError):
+        while log.drain():
+            select.select([log.read_fd], [], [])
         return os.waitpid(worker, 0)[1]
     watch = select.poll()
     watch.register(pidfd, select.POLLIN)
     watch.register(ctrl_w, 0)  # only errors: POLLERR once the reading end is closed
+    watch.register(log.read_fd, select.POLLIN)
     try:
         while True:
             pid, status = os.waitpid(worker, os.WNOHANG)
             if pid:
                 return status
-            if any(fd == ctrl_w for fd, _ in watch.poll()):
+            ready = {fd for fd, _ in watch.poll()}
+            if log.read_fd in ready and not log.drain():
+                watch.unregister(log.read_fd)   # every writer closed it: no more to copy
+            if ctrl_w in ready:
                 watch.unregister(ctrl_w)
                 with contextlib.suppress(ProcessLookupError):
                     os.kill(worker, signal.SIGKILL)
@@ -96,15 +122,15 @@ def _wait_worker(worker: int, ctrl_w: int) -> int:
         os.close(pidfd)
 
 
-def _worker(fn, result_w: int, memory_mb, output, confine, untrusted: bool) -> None:
+def _worker(fn, result_w: int, memory_mb, confine, scratch, own_mounts: bool) -> None:
     message = b"R" + b"worker did not start"
     try:
         _keep_inherited_pages_shared()
         isolation.die_with_parent()
         isolation.close_fds_except(result_w)
-        _redirect_output(output)
-        if untrusted:
-            _confine(confine)
+        _rebind_output()
+        if confine is not None:
+            _confine(confine, scratch, own_mounts)
         _limit_memory(memory_mb)
         try:
             payload = fn()
@@ -121,11 +147,48 @@ def _worker(fn, result_w: int, memory_mb, output, confine, untrusted: bool) -> N
         os._exit(0)
 
 
-def _confine(read_only) -> None:
-    """Close what the kernel lets a method's worker close off (docs/robustness.md); say on
-    its own log what it could not, so a reader of the row's log knows the run was open."""
-    missing = (["a mount namespace"] if read_only is None
-               else isolation.confine_files(read_only, hidden_files=[integrity.key_path()]))
+def _scratch(confine, own_mounts: bool) -> tuple[str | None, bool]:
+    """The directory a method's worker may write, and whether this keeper made it.
+
+    With a mount namespace of its own, the worker mounts a private tmpfs over the run's
+    scratch directory (:func:`rippleb.engine.isolation.confine_files`), which vanishes with
+    it: nothing to make or remove. Otherwise the keeper makes one (making and removing a
+    directory per job cost about 1 ms, ``shutil.rmtree`` alone 3 ms in a forked process).
+    """
+    if confine is None:
+        return None, False
+    if own_mounts and confine.scratch_in is not None:
+        return confine.scratch_in, False
+    return tempfile.mkdtemp(prefix="rippleb-scratch-", dir=confine.scratch_in), True
+
+
+def _remove(scratch: str) -> None:
+    try:
+        os.rmdir(scratch)   # most jobs leave it empty
+    except OSError:
+        shutil.rmtree(scratch, ignore_errors=True)
+
+
+def _as_confinement(confine) -> isolation.Confinement:
+    """``confine`` as a :class:`~rippleb.engine.isolation.Confinement` (a bare sequence:
+    the read-only directories)."""
+    return confine if isinstance(confine, isolation.Confinement) else isolation.Confinement(tuple(confine))
+
+
+def _confine(confine: isolation.Confinement, scratch: str, own_mounts: bool) -> None:
+    """In a method's worker, before its code runs: close what the kernel lets it close off
+    (docs/robustness.md), mounts first (:mod:`rippleb.engine.isolation`), then the walls
+    that keep them (:mod:`rippleb.engine.sandbox`); say on its own log what it could not,
+    so a reader of the row's log knows the run was open. Its command line (the runner's,
+    which may name a salt file) is wiped, and its temporary files go to ``scratch``."""
+    hidden = [integrity.key_path(), *confine.hidden]
+    missing = (isolation.confine_files(confine.read_only, hidden_files=hidden, scratch=confine.scratch_in)
+               if own_mounts else ["a mount namespace"])
+    os.environ["TMPDIR"] = scratch
+    tempfile.tempdir = None
+    _numba_cache_into(scratch)
+    sandbox.wipe_command_line()
+    missing += sandbox.lock_down(scratch, nested_namespace=own_mounts and not missing)
     if missing:
         print(f"rippleb: this worker is not confined: no {', no '.join(missing)} (the kernel refused)",
               file=sys.stderr)
@@ -134,6 +197,19 @@ def _confine(read_only) -> None:
         # be dumpable again, as a plain process is (a method that reads /proc/self/mem, /environ
         # or /io as an unprivileged user; those files belong to root in a process that is not).
         isolation.dumpable_again()
+
+
+def _numba_cache_into(scratch: str) -> None:
+    """numba keeps compiled functions beside their source or in ``$HOME``, both read-only to
+    a method's worker now, and a function with ``cache=True`` then fails as it is defined
+    ("no locator available"), e.g. rippleb.dsp imported by a plugin in ``rippleb list``'s
+    probe. Its cache goes to the scratch directory instead: a plugin's kernels compile in
+    each job (the fork server's built-in ones are compiled already). numba reads
+    ``NUMBA_CACHE_DIR`` when imported, and ``config.CACHE_DIR`` when a function is defined."""
+    os.environ["NUMBA_CACHE_DIR"] = scratch
+    config = sys.modules.get("numba.core.config")
+    if config is not None:
+        config.CACHE_DIR = scratch
 
 
 def _keep_inherited_pages_shared() -> None:
@@ -157,14 +233,8 @@ def _write_all(fd: int, data: bytes) -> None:
         view = view[n:]
 
 
-def _redirect_output(path: str | None) -> None:
-    null = os.open(os.devnull, os.O_RDONLY)
-    os.dup2(null, 0)
-    os.close(null)
-    fd = os.open(path or os.devnull, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-    os.dup2(fd, 1)
-    os.dup2(fd, 2)
-    os.close(fd)
+def _rebind_output() -> None:
+    """Point Python's stdout and stderr at fds 1 and 2 (the job's output pipe, :mod:`rippleb.engine.joblog`)."""
     # sys.stdout/stderr may be wrappers that bypass fds 1 and 2 (pytest, IDEs): rebind them.
     sys.stdout = open(1, "w", buffering=1, closefd=False)
     sys.stderr = open(2, "w", buffering=1, closefd=False)

@@ -155,8 +155,8 @@ class Pool:
         """Start ``fn`` (see ``context``) in an isolated worker; its stdout and stderr go to
         the file ``output`` (or /dev/null), so a chatty plugin cannot garble the CLI's output.
 
-        ``confine``: None for rippleb's own jobs; for a method's, the directories its worker
-        sees read-only (:func:`rippleb.engine.isolation.confine_files`; ``()`` for none)."""
+        ``confine``: None for rippleb's own jobs; for a method's, an :class:`~rippleb.engine.isolation.Confinement`
+        (the directories its worker sees read-only, the files hidden from it)."""
         # Held: a keeper started but not yet tracked would be orphaned with its pipes open.
         with interrupts.held():
             reap_exiting()

@@ -28,8 +28,9 @@ import numpy as np
 from rippleb.simulator.conditions import DEFAULT_CONDITION
 from rippleb import integrity
 from rippleb.errors import InputError, RunWarning  # noqa: F401 - RunWarning: re-exported
-from rippleb.files import atomic_path
+from rippleb.files import atomic_path, open_appending
 from rippleb.metrics import METRIC_COLUMNS
+from rippleb.printable import escaped
 from rippleb.scorable import NO_REFERENCE
 from rippleb.truthfree import TRUTH_FREE_COLUMNS
 
@@ -148,7 +149,11 @@ class ResultsFile:
 
     def add(self, row: dict) -> None:
         """Keep one finished row and put it on disk: appended, or with the whole file
-        rewritten (the first row, a new column, or the rewrite interval passed)."""
+        rewritten (the first row, a new column, or the rewrite interval passed). A
+        message is kept with its control characters escaped (:mod:`rippleb.printable`):
+        a method's text never reaches a terminal or a README able to act."""
+        if row.get("message") is not None:
+            row = {**row, "message": escaped(row["message"])}
         self.rows.append(row)
         if any(name not in self._header for name in row):
             self._format_all()   # a new column: every line gets a cell for it
@@ -164,7 +169,7 @@ class ResultsFile:
         if self.path is None or time.monotonic() - self._written_at >= due or not self.path.is_file():
             self.flush()
         else:
-            with open(self.path, "a", encoding="utf-8") as fh:
+            with open_appending(self.path) as fh:
                 fh.write(line)
 
     def flush(self) -> None:

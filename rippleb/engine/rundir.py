@@ -12,7 +12,9 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import json
+import os
 import re
+import secrets
 import warnings
 from pathlib import Path
 
@@ -37,11 +39,12 @@ def run_dir(out, resume: bool, config: dict, on_start=None):
     out = Path(out)
     try:
         out.mkdir(parents=True, exist_ok=True)
-        probe = out / ".write-test"
-        probe.write_text("")
+        probe = out / f".write-test-{secrets.token_hex(8)}"   # a new file: never one planted there
+        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600))
         probe.unlink()
     except OSError as exc:
         raise InputError(f"{out}: cannot write the output directory: {exc.strerror or exc}") from None
+    refuse_links(out)
     with _locked(out):
         if resume:
             _check_resume(out, config)
@@ -58,9 +61,30 @@ def run_dir(out, resume: bool, config: dict, on_start=None):
         yield out
 
 
+#: What rippleb writes in a run directory; none of them may be a symbolic link.
+OWN_ENTRIES = (".lock", "run.json", "results.csv", integrity.LEDGER, "provenance.json", "logs")
+
+
+def refuse_links(out: Path) -> None:
+    """Refuse a run directory where a file rippleb writes (:data:`OWN_ENTRIES`, or a log
+    in ``logs/``) is a symbolic link: rippleb makes none, and writing through one would
+    truncate or fill the file it names, anywhere the user may write (issue 34)."""
+    logs = out / "logs"
+    found = [out / name for name in OWN_ENTRIES if (out / name).is_symlink()]
+    if not found and logs.is_dir():
+        found = [entry for entry in sorted(logs.iterdir()) if entry.is_symlink()][:1]
+    if found:
+        raise InputError(f"{found[0]}: a symbolic link, which rippleb never makes in a run directory; "
+                         f"rippleb does not write through it: remove it, or choose another --out")
+
+
 @contextlib.contextmanager
 def _locked(out: Path):
-    handle = open(out / ".lock", "a")
+    try:
+        handle = open(os.open(out / ".lock", os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC,
+                              0o644), "a")
+    except OSError as exc:
+        raise InputError(f"{out / '.lock'}: cannot open the run's lock: {exc.strerror or exc}") from None
     try:
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)

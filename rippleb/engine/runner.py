@@ -36,7 +36,7 @@ from rippleb import interrupts
 from rippleb.engine import isolation
 from rippleb.engine import jobs as job_fns
 from rippleb import numerics
-from rippleb.engine import sealing
+from rippleb.engine import sandbox, sealing
 from rippleb.engine.cache import digest, log_bytes
 from rippleb.engine.checks import (check_calibration, check_options, check_recording, check_reference, check_scenario,
                             check_scored_length)
@@ -268,6 +268,8 @@ def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, pro
         if executor is not None and hasattr(executor, "check"):
             with interrupts.raising():  # a bad address is bad input: refused before the directory is claimed
                 executor.check()
+        if executor is None:   # a Dask worker's log says what its own kernel grants
+            sandbox.say_missing(sealed=sealed is not None or salt_file is not None)
         # The local jobs are forked by a server forked now, before the first simulation, so
         # no job's memory ever holds a truth (rippleb.engine.forkserver). Another executor runs its
         # rows elsewhere.
@@ -308,9 +310,12 @@ def _run_rows(registry, plan: Plan, results: ResultsFile, out_dir, *, resume, jo
                   key=lambda k: (k.seed, k.scenario, k.extra, k.condition, k.method))
     if resume and rows:
         say_other_versions(results.rows, out_dir)
-    with tempfile.TemporaryDirectory(prefix="rippleb-cache-") as cache:
+    # The methods' scratch directories live in one of the run's own, removed with it even
+    # where a keeper was killed before it could remove its job's.
+    with tempfile.TemporaryDirectory(prefix="rippleb-cache-") as cache, \
+            tempfile.TemporaryDirectory(prefix="rippleb-scratch-") as scratch:
         state = State(plan, registry, results, Path(cache), log_dir(out_dir), timeout,
-                      time.strftime("%Y%m%dT%H%M%S"), rows, seal=seal)
+                      time.strftime("%Y%m%dT%H%M%S"), rows, seal=seal, scratch=Path(scratch))
         with progress_bar(len(rows), progress) as bar:
             prepare_cases(state)
             interrupts.check_interrupted()

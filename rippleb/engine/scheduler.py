@@ -15,7 +15,7 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from rippleb.engine import jobs as job_fns
+from rippleb.engine import isolation, jobs as job_fns
 from rippleb.interrupts import check_interrupted
 from rippleb.engine.cache import Artefact, TamperedError, digest, load_log, log_bytes, store, unpack
 from rippleb.data import SensorLog
@@ -76,6 +76,7 @@ class State:
     logs: dict = field(default_factory=dict)        # scored Case -> its visible log, verified (rows open)
     invalid: dict = field(default_factory=dict)     # Case -> why its simulated log is not physical
     seal: object = None                              # a sealed run's rippleb.engine.sealing.Seal, else None
+    scratch: Path | None = None                      # where methods' jobs get their scratch directories
 
 
 def say_retried(dropped: list[dict], out_dir) -> None:
@@ -190,10 +191,10 @@ def _start_next(pool: Pool, state: State, bar) -> bool:
     return False
 
 
-def _confined(state: State) -> tuple[str, ...]:
-    """What a method's worker sees read-only: the run directory and the cache."""
-    run_dir = state.results.path.parent if state.results.path is not None else None
-    return tuple(str(p) for p in (run_dir, state.cache) if p is not None)
+def _confined(state: State) -> isolation.Confinement:
+    """A method's worker: the run directory and the cache read-only, a sealed run's salt files hidden."""
+    return isolation.Confinement.of([state.results.path and state.results.path.parent, state.cache],
+                                    state.seal.files() if state.seal else (), state.scratch)
 
 
 def _output(state: State, stem: str) -> str | None:

@@ -57,12 +57,19 @@ class Seal:
         ``SALT_BYTES`` random bytes.
     save_to
         Where to write the salt when the run ends (a new sealed run), or None (resumed).
+    read_from
+        The file a resumed run read the salt from (None: standard input, or a new run).
     """
 
-    def __init__(self, salt: bytes, save_to: Path | None = None):
+    def __init__(self, salt: bytes, save_to: Path | None = None, read_from: Path | None = None):
         self._salt = bytearray(salt)   # a bytearray can be wiped when the run ends
         self.save_to = save_to
+        self.read_from = read_from
         self.commitment = commitment(salt)
+
+    def files(self) -> tuple[Path, ...]:
+        """The salt's files, which a method's worker sees covered (:mod:`rippleb.engine.isolation`)."""
+        return tuple(path for path in (self.save_to, self.read_from) if path is not None)
 
     def device_seed(self, seed: int) -> int:
         """The seed a sealed run simulates for the public ``seed``: 256 bits of
@@ -154,7 +161,7 @@ def _resumed_seal(out: Path, salt_file) -> Seal | None:
     if commitment(salt) != expected:
         raise InputError(f"{_name(salt_file)}: not the salt of this run (its SHA-256 differs from the "
                          f"commitment {expected[:19]}... in {where})")
-    return Seal(salt)
+    return Seal(salt, read_from=None if str(salt_file) == "-" else Path(salt_file))
 
 
 def read_salt(path) -> bytes:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from rippleb.printable import escaped
+
 
 def markdown(rows, headers) -> str:
     """A GitHub Markdown table; cells are printed as given, but for ``|``, escaped as ``\\|``
@@ -25,9 +27,9 @@ def plural(n: int, word: str) -> str:
 
 def first_line(message) -> str:
     text = "" if message is None or (isinstance(message, float) and np.isnan(message)) else str(message)
-    return text.splitlines()[0] if text.strip() else "(no message)"
+    return escaped(text.splitlines()[0]) if text.strip() else "(no message)"
 
 
 def one_line(message) -> str:
     text = "" if message is None or (isinstance(message, float) and np.isnan(message)) else str(message)
-    return text.splitlines()[0][:200].replace("|", "/") if text else ""
+    return escaped(text.splitlines()[0])[:200].replace("|", "/") if text else ""

@@ -38,8 +38,13 @@ def test_raw_has_the_simulators_full_bandwidth_and_no_step_latency(calibration):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("cutoff", [10.0, 30.0])
+@pytest.mark.parametrize("cutoff", [10.0, 15.0])
 def test_lowpass_bandwidth_is_its_cutoff(calibration, cutoff):
+    """Cut-offs below the joint's locked-motor resonance (17-19 Hz, docs/physics.md): near it
+    the truth -> estimate gain dips for every estimate (lowpass at 30 Hz: 0.72 at 21-22 Hz
+    with an ideal gear, 0.70 with the gear's transmission error, whose torque tips it), so a
+    low-pass's -3 dB crossing there is the joint's, not the filter's (30 Hz measured 21 Hz;
+    20 Hz measured 17.6 Hz)."""
     row = _row("lowpass", "torque-chirp", calibration, cutoff_hz=cutoff)
     assert row["bandwidth_hz"] == pytest.approx(cutoff, rel=0.08)
     # half a step comes out about one low-frequency group delay, sqrt(2) / (2 pi fc), late

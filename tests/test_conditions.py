@@ -302,8 +302,10 @@ def test_kalman_ripple_re_homes_on_the_index_after_a_power_cycle():
     homed, _ = _rms(method, None, cycled)
     blind, _ = _rms(method, None, cycled, keep_index=False)
     # 0.74 with the rigid joint; the closed-loop joint's own torque dynamics add error that
-    # no ripple map removes (homed 1.08 -> 1.21 Nm, blind 1.47 unchanged): 0.82 now
-    assert homed < 0.88 * blind
+    # no ripple map removes (homed 1.08 -> 1.21 Nm, blind 1.47 unchanged): 0.82; the gear's
+    # transmission error adds error both share (kalman-ripple erases half of that torque):
+    # homed 1.26, blind 1.38 Nm, 0.91 now (0.89 against the joint without the gear's torque)
+    assert homed < 0.95 * blind
     # in the calibration session's power-on, re-homing changes nothing
     same = simulate("paper-quintic", seed)
     _, est_a = _rms(method, None, same)

@@ -8,6 +8,7 @@ of a test is therefore known exactly, unlike the simulator's.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from rippleb import JointSpec
 from rippleb.data import make_log
@@ -74,3 +75,9 @@ def estimate(method, log, size=None) -> np.ndarray:
     method.reset(log.spec)
     visible = log.for_method(keep_ref=False)
     return np.concatenate([method.step(b) for b in visible.blocks(size)])
+
+
+@pytest.fixture(scope="module")
+def calibration():
+    """The synthetic calibration log, made once per test module that imports this fixture."""
+    return calibration_log()

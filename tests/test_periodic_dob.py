@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from ripple_signals import (SPEC, calibration_log, error_rms, estimate, synthetic_log,
+from ripple_signals import (SPEC, calibration, error_rms, estimate, synthetic_log,  # noqa: F401 (fixture)
                             with_index)
 
 from rippleb.methods.periodic_dob import PeriodicDOB
@@ -13,11 +13,6 @@ from rippleb.methods.raw import Raw
 from rippleb.testing import check_method, default_logs
 
 N = int(3.0 * SPEC.fs)
-
-
-@pytest.fixture(scope="module")
-def calibration():
-    return calibration_log()
 
 
 def test_check_method():

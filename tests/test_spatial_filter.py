@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from ripple_signals import SPEC, calibration_log, error_rms, estimate, synthetic_log
+from ripple_signals import SPEC, calibration, error_rms, estimate, synthetic_log  # noqa: F401 (fixture)
 
 from rippleb.methods.spatial_filter import SpatialFilter
 from rippleb.methods.raw import Raw
@@ -13,11 +13,6 @@ from rippleb.testing import check_method
 
 SECONDS = 3.0
 N = int(SECONDS * SPEC.fs)
-
-
-@pytest.fixture(scope="module")
-def calibration():
-    return calibration_log()
 
 
 def test_check_method():

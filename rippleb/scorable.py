@@ -22,6 +22,9 @@ import numpy as np
 
 #: Status of a row scored on a log without any reference torque.
 NO_REFERENCE = "no-reference"
+#: Statuses of rows whose method ran to the end on a log it may be scored on: their cost
+#: and truth-free scores are measured, and a recording's report ranks them.
+MEASURED = ("ok", NO_REFERENCE)
 #: What a row on a log without a reference says.
 NO_REFERENCE_MESSAGE = ("the log has no reference torque (no torque_ref or torque_true column): its accuracy "
                         "cannot be scored (the error, delay, bandwidth, stopped and restart columns stay "

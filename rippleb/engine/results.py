@@ -31,7 +31,7 @@ from rippleb.errors import InputError, RunWarning  # noqa: F401 - RunWarning: re
 from rippleb.files import atomic_path, open_appending
 from rippleb.metrics import METRIC_COLUMNS
 from rippleb.printable import escaped
-from rippleb.scorable import NO_REFERENCE
+from rippleb.scorable import MEASURED, NO_REFERENCE  # noqa: F401 - MEASURED re-exported
 from rippleb.truthfree import TRUTH_FREE_COLUMNS
 
 KEY_COLUMNS = ("method", "scenario", "condition", "seed")
@@ -41,8 +41,6 @@ COLUMNS = (KEY_COLUMNS + ("status",) + METRIC_COLUMNS + TRUTH_FREE_COLUMNS
               "rippleb_version", "python", "numpy", "platform", "cpu", "numerics", "run_id"))
 NUMERIC_COLUMNS = METRIC_COLUMNS + TRUTH_FREE_COLUMNS + ("n_samples", "fit_s", "wall_s")
 STATUSES = ("ok", "error", "invalid", "timeout", NO_REFERENCE)
-#: Statuses of rows whose method ran to the end on a log it may be scored on: their cost is measured.
-MEASURED = ("ok", NO_REFERENCE)
 #: An ``ok`` row holds at least one of these: an error against a reference, or, on a log
 #: with none, a truth-free score.
 SCORE_COLUMNS = ("rms_error_nm", "rms_error_ref_nm") + TRUTH_FREE_COLUMNS

@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 
-from rippleb.scorable import NO_REFERENCE
 from rippleb.report.plotting import ScenarioSignals, _amplitude, _pyplot, _save, style
 
 def speed_edges(signals, n_bins: int = 12) -> np.ndarray:
@@ -239,10 +238,10 @@ def plot_accuracy_vs_cost(frame, out_png, column: str = "rms_error_nm") -> Path:
     or on a recorded log what it is ranked by) averaged over scenarios for each seed (point:
     mean over seeds, bar: 95 % t-interval) against the median over rows of ``us_per_tick_p99``
     (bar: 25th to 75th percentile)."""
-    from rippleb.report.stats import method_order, t_interval
+    from rippleb.report.stats import measured_rows, method_order, t_interval
 
     plt = _pyplot()
-    ok = frame[frame["status"].isin(("ok", NO_REFERENCE))]
+    ok = measured_rows(frame)
     names = method_order(ok["method"].unique())
     # Average only over scenarios every method finished, so that a method is not favoured
     # by missing its hardest scenario.

@@ -16,7 +16,6 @@ from pathlib import Path
 
 import numpy as np
 
-from rippleb.scorable import NO_REFERENCE
 from rippleb.report.error_figures import (COST_FIGURE_LABELS, error_by_speed,  # noqa: F401
                                    error_by_speed_over_seeds, longest_rest_restart, plot_accuracy_vs_cost,
                                    plot_error_vs_speed, plot_residual_spectra, plot_restart_zoom,
@@ -244,7 +243,7 @@ def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
     from rippleb.simulator.conditions import DEFAULT_CONDITION
     from rippleb.report.provenance import seeds_text
     from rippleb.engine.results import swept_columns
-    from rippleb.report.stats import method_order, with_condition
+    from rippleb.report.stats import measured_rows, method_order, with_condition
 
     if fmt not in FORMATS:
         from rippleb.errors import InputError
@@ -258,7 +257,8 @@ def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
                                      f"Strain spectra over time and over angle (Fig. 2 replica, seed {seed})")
     frame = with_condition(frame)
     # a recording without a reference (no-reference rows) is still drawn by its truth-free column
-    ok = frame[frame["status"].isin(("ok", NO_REFERENCE)) & (frame["condition"] == DEFAULT_CONDITION)]
+    ok = measured_rows(frame)
+    ok = ok[ok["condition"] == DEFAULT_CONDITION]
     methods = method_order(ok["method"].unique())
     scenarios = [s for s in SIGNAL_SCENARIOS if s in set(ok["scenario"])]
     signals = {}

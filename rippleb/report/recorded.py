@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from rippleb.report.markdown import first_line, markdown, one_line, plural
-from rippleb.report.stats import method_order, scenario_order
-from rippleb.scorable import NO_REFERENCE
+from rippleb.report.stats import measured_rows, method_order, scenario_order
+from rippleb.scorable import MEASURED
 from rippleb.report.tables import failed_markdown, is_recorded, summary_text, timing_cells
 
 #: The truth-free column a log without any reference is ranked by: the one whose ranking
@@ -45,15 +45,6 @@ TRUTH_FREE_CAVEATS = [
     "the strain (current-based) may lead (negative).",
 ]
 
-#: Rows a recording's report ranks: ``ok`` ones, and those of a log without a reference
-#: (``no-reference``), whose truth-free scores still rank them.
-RANKABLE = ("ok", NO_REFERENCE)
-
-
-def rankable(frame):
-    """The rows of ``frame`` whose status is in :data:`RANKABLE`."""
-    return frame[frame["status"].isin(RANKABLE)]
-
 
 #: What a recorded log is ranked by, best first: the first of these that an ok row has. Not
 #: ``rest_std_nm``: its ranking ran against the true one (docs/metrics.md).
@@ -63,7 +54,7 @@ RANKING_ORDER = ("rms_error_nm", "rms_error_ref_nm", TRUTH_FREE_RANKING, "strain
 def ranking_column(frame) -> str:
     """The column the rows of a recorded log are ranked by: the first of :data:`RANKING_ORDER`
     that some ok row has a value in (:data:`TRUTH_FREE_RANKING` if none has)."""
-    ok = rankable(frame)
+    ok = measured_rows(frame)
     for column in RANKING_ORDER:
         if column in ok and np.isfinite(ok[column].astype(float)).any():
             return column
@@ -79,15 +70,16 @@ def sort_key(values):
 
 def shown_columns(frame) -> list[str]:
     """The columns of :data:`RECORDED_COLUMNS` that some ok row has a value in."""
-    ok = rankable(frame)
+    ok = measured_rows(frame)
     return [c for c in RECORDED_COLUMNS if c in ok and np.isfinite(ok[c].astype(float)).any()]
 
 
 def log_table(rows, column: str):
-    """One log's rankable rows (:data:`RANKABLE`) sorted by ``column`` (lowest first; methods without a value last),
+    """One log's measured rows (:func:`~rippleb.report.stats.measured_rows`) sorted by ``column``
+    (lowest first; methods without a value last),
     with a rank per shown column (``strain_delay_ms`` by its absolute value: a lead is no
     better than a lag)."""
-    ok = rankable(rows).copy()
+    ok = measured_rows(rows).copy()
     for c in shown_columns(rows):
         ok[f"rank:{c}"] = sort_key(ok[c]).rank(method="min")
     ok["_key"] = sort_key(ok[column]) if column in ok else np.nan
@@ -162,7 +154,7 @@ def recorded_tables_markdown(frame) -> str:
         rows = frame[frame["scenario"] == log]
         column = ranking_column(rows)
         parts += [f"## `{log}`: methods ranked by `{column}`", "", basis_sentence(column), "",
-                  log_markdown(rows) if len(rankable(rows)) else "(no rows to rank)", "",
+                  log_markdown(rows) if len(measured_rows(rows)) else "(no rows to rank)", "",
                   f"- {leader_sentence(rows, column)}", ""]
     parts += ["### What the truth-free columns cannot tell", ""] + [f"- {c}" for c in TRUTH_FREE_CAVEATS] + [""]
     parts += ["## Rows that did not finish ok", "", failed_markdown(frame)]
@@ -175,10 +167,10 @@ def recorded_summary_text(frame) -> str:
     for log in scenario_order(frame["scenario"].unique()):
         rows = frame[frame["scenario"] == log]
         column = ranking_column(rows)
-        n_ok = len(rankable(rows))
+        n_ok = len(measured_rows(rows))
         parts += [f"{log}: {plural(n_ok, 'ranked row')} of {len(rows)}, ranked by {column}", ""]
         parts += [log_markdown(rows) if n_ok else "(no rows to rank)", ""]
-    failed = frame[~frame["status"].isin(RANKABLE)]
+    failed = frame[~frame["status"].isin(MEASURED)]
     for r in failed.itertuples():
         parts.append(f"- {r.method} / {r.scenario}: {r.status}: {one_line(first_line(r.message))}")
     return "\n".join(parts).rstrip()

@@ -75,6 +75,15 @@ def ok_rows(frame):
     return frame[frame["status"] == "ok"]
 
 
+def measured_rows(frame):
+    """The rows whose method ran to the end on a log it may be scored on
+    (:data:`rippleb.scorable.MEASURED`: ``ok``, and ``no-reference`` rows of a recording
+    without a reference, still ranked by their truth-free scores)."""
+    from rippleb.scorable import MEASURED
+
+    return frame[frame["status"].isin(MEASURED)]
+
+
 def with_condition(frame):
     """``frame`` with a ``condition`` column: rows of a run made before conditions existed
     were all scored in the calibration session, i.e. ``same-session``."""

@@ -168,16 +168,9 @@ class AngleAdaptive(Method):
         """
         if calibration.torque_ref is None:
             raise ValueError("angle-adaptive needs torque_ref in the calibration log")
-        spec = calibration.spec
-        orders = np.asarray(self.orders, dtype=np.int64)
-        table = phasor_table(int(spec.counts_per_rev))
         self.home_ = first_index_count(calibration.encoder, calibration.index)
-        D = spec.block_size
-        T = len(calibration) // D
-        enc = calibration.encoder[:T * D].reshape(T, D) - (self.home_ or 0)
-        strain = calibration.strain[:T * D].reshape(T, D).mean(axis=1)
-        tau = calibration.torque_ref[:T * D].reshape(T, D).mean(axis=1)
-        phi = angle_regressors(enc, orders, table).mean(axis=1)
+        enc, phi, strain, tau = self._calibration_ticks(calibration)
+        T = len(tau)
         design = np.hstack([tau[:, None], np.ones((T, 1)), phi, tau[:, None] * phi,
                             np.abs(tau)[:, None] * phi])
         coef, *_ = np.linalg.lstsq(design, strain, rcond=None)
@@ -191,6 +184,19 @@ class AngleAdaptive(Method):
         error = (np.diff(y, n=2) - map_rows(np.diff(phi, n=2, axis=0), y[:-2]) @ self.map_)[moved]
         self.r_ = float(max(np.mean(error ** 2), 1e-12)) if len(error) else 1e-4
         self.residual_rms_ = float(np.std(y - tau - rows @ self.map_))
+
+    def _calibration_ticks(self, calibration: SensorLog):
+        """Per control tick of ``calibration``: the encoder counts in the index frame
+        (``home_``), the tick-mean angle regressors, strain and ``torque_ref``."""
+        spec = calibration.spec
+        D = spec.block_size
+        T = len(calibration) // D
+        enc = calibration.encoder[:T * D].reshape(T, D) - (self.home_ or 0)
+        phi = angle_regressors(enc, np.asarray(self.orders, dtype=np.int64),
+                               phasor_table(int(spec.counts_per_rev))).mean(axis=1)
+        strain = calibration.strain[:T * D].reshape(T, D).mean(axis=1)
+        tau = calibration.torque_ref[:T * D].reshape(T, D).mean(axis=1)
+        return enc, phi, strain, tau
 
     # ------------------------------------------------------------ streaming
     def reset(self, spec: JointSpec) -> None:

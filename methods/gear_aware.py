@@ -36,8 +36,7 @@ from __future__ import annotations
 import numpy as np
 
 from rippleb.data import SensorLog
-from rippleb.methods.angle_adaptive import (AngleAdaptiveFrozen, angle_regressors, first_index_count,
-                                            map_rows, phasor_table)
+from rippleb.methods.angle_adaptive import AngleAdaptiveFrozen, map_rows
 
 
 def gear_rows(angle: np.ndarray, speed: np.ndarray, accel: np.ndarray, orders) -> np.ndarray:
@@ -97,15 +96,9 @@ class GearAware(AngleAdaptiveFrozen):
         coefficients (``gear_coef_``) are the calibration's gear torque, not subtracted."""
         super().fit(calibration)
         spec = calibration.spec
-        D = spec.block_size
-        T = len(calibration) // D
-        enc = calibration.encoder[:T * D].reshape(T, D) - (first_index_count(calibration.encoder,
-                                                                              calibration.index) or 0)
-        phi = angle_regressors(enc, np.asarray(self.orders, dtype=np.int64),
-                               phasor_table(int(spec.counts_per_rev))).mean(axis=1)
-        y = self.gain_ * calibration.strain[:T * D].reshape(T, D).mean(axis=1) + self.offset_
-        tau = calibration.torque_ref[:T * D].reshape(T, D).mean(axis=1)
-        tick_s = D / spec.fs
+        enc, phi, strain, tau = self._calibration_ticks(calibration)
+        y = self.gain_ * strain + self.offset_
+        tick_s = spec.block_size / spec.fs
         angle = enc.mean(axis=1) * 2.0 * np.pi / spec.counts_per_rev
         speed = smooth(np.gradient(angle, tick_s), self.speed_ticks)
         accel = smooth(np.gradient(speed, tick_s), self.speed_ticks)

@@ -16,19 +16,15 @@ import time
 
 import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
 
-import numpy as np
+from calibration_tuning import calibration_logs, mean_score  # beside this script: one scoring
 
-from rippleb.metrics import Truth, score
 from rippleb.registry import Registry
-from rippleb.simulator import simulate
-from rippleb.streaming import run_method
 from rippleb.tuning import candidates, check_tunable
 
 
 def evaluate(cls, params: dict, sims) -> float:
     """Mean ``rms_error_ref_nm`` of ``cls(**params)`` fitted and scored on each calibration log."""
-    return float(np.mean([score(run_method(cls(**params), s.log, s.log)[0], Truth.from_simulation(s))
-                          ["rms_error_ref_nm"] for s in sims]))
+    return mean_score(cls, params, sims)["rms_error_ref_nm"]
 
 
 def main(argv=None) -> None:
@@ -39,7 +35,7 @@ def main(argv=None) -> None:
     parser.add_argument("--out", default=None, help="JSON file for the results")
     args = parser.parse_args(argv)
     lo, hi = (int(v) for v in args.seeds.split("-"))
-    sims = [simulate("calibration", seed) for seed in range(lo, hi + 1)]
+    sims = calibration_logs(range(lo, hi + 1))
     registry = Registry.discover()
     names = args.methods.split(",") if args.methods else registry.names("builtin")
     report = {"budget": args.budget, "seeds": [lo, hi], "criterion": "rms_error_ref_nm on calibration",

@@ -315,7 +315,9 @@ def score(estimate: np.ndarray, truth: Truth) -> dict[str, float]:
         "step_latency_ms": step_latency_ms(estimate, truth),
         "restart_max_error_nm": restart_max_error(estimate, best, truth),
         "stopped_rms_error_nm": rms_error(estimate, best, rest),
-        "gear_torque_rms_nm": rms_error(np.zeros_like(estimate), truth.torque_gear, mask),
+        # the same for every method of a case: computed once per truth
+        "gear_torque_rms_nm": truth.remembered(
+            "gear_rms", lambda: rms_error(np.zeros(len(mask)), truth.torque_gear, mask)),
         "gear_erased_fraction": gear_erased(estimate, truth.torque_true, truth.torque_gear, mask),
         "rms_error_without_gear_nm": rms_error(estimate, _without_gear(truth), mask),
     }

@@ -42,6 +42,7 @@ def test_an_ideal_gear_adds_nothing_and_the_default_gear_adds_real_torque():
     # the same joint with and without the error: torque_true differs by torque_gear exactly
     assert np.allclose(real.log.torque_true - real.torque_gear, ideal.log.torque_true, rtol=0, atol=1e-12)
     assert np.sqrt(np.mean(real.torque_gear[real.eval_mask] ** 2)) > 0.1   # Nm, not a rounding
+    assert simulate("calibration", 3).torque_gear is None   # no row is scored on it
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

@@ -63,7 +63,8 @@ class Simulation:
         The drive's transmission error (:mod:`rippleb.simulator.transmission`).
     torque_gear
         What that error adds to ``torque_true`` [Nm]: the real torque of this joint minus
-        that of the same joint with an ideal gear (zero when the error is off).
+        that of the same joint with an ideal gear (zero when the error is off; None for an
+        unscored session, the calibration, where no row is scored).
     """
 
     log: SensorLog
@@ -116,8 +117,15 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     # What the gear's error adds to the real torque (the metrics' "erased" columns; never
     # streamed to a method): this joint against the same joint with an ideal gear, each
     # under its own loop (docs/metrics.md, "What a method erased", says what else the
-    # difference holds: the loop's response to the error, and encoder-edge jitter).
-    torque_gear = tau_true - controller.run(*loop, encoder=errors)[4] if gear.active else np.zeros(n)
+    # difference holds: the loop's response to the error, and encoder-edge jitter). Only
+    # for a scored session: no row is scored on the calibration log, and its twin run
+    # would be the longest integration of every case.
+    if not sc.scored:
+        torque_gear = None
+    elif gear.active:
+        torque_gear = tau_true - controller.run(*loop, encoder=errors)[4]
+    else:
+        torque_gear = np.zeros(n)
 
     strain = strain_bridge(device, sc, t, theta_m, tau_true, noise, output_angle=q, knobs=knobs)
     current = current_sense(sc, commanded, device.current_offset, noise)

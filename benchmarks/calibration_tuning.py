@@ -16,12 +16,8 @@ import itertools
 
 import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
 
-import numpy as np
-
-from rippleb.metrics import Truth, score
 from rippleb.registry import Registry
-from rippleb.simulator import simulate
-from rippleb.streaming import run_method
+from rippleb.engine.tuner import calibration_logs, mean_score
 
 #: method -> {parameter: candidates}; see each method's page in docs/methods/.
 GRIDS = {
@@ -38,17 +34,6 @@ GRIDS = {
     "periodic-dob": {"bins": (250, 500, 1250), "memory_revs": (3.0, 10.0, 30.0, 100.0),
                      "nominal_hz": (2.0, 10.0, 30.0)},
 }
-
-
-def calibration_logs(seeds):
-    """The calibration simulation of each seed, simulated once."""
-    return [simulate("calibration", seed) for seed in seeds]
-
-
-def mean_score(cls, params: dict, sims) -> dict:
-    """Mean of each score column of ``cls(**params)`` fitted and scored on each log."""
-    rows = [score(run_method(cls(**params), s.log, s.log)[0], Truth.from_simulation(s)) for s in sims]
-    return {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
 
 
 def main(argv=None) -> None:

@@ -107,11 +107,12 @@ class AngleAdaptive(Method):
     orders
         Ripple orders of the wave-generator angle (``docs/physics.md``: 1, 2, 4, 6, 8).
     memory_revs
-        Forgetting time constant in wave-generator revolutions (chosen on calibration).
+        Forgetting time constant in wave-generator revolutions (139: the one tuning
+        protocol's, ``methods/tuning.json``).
     prior_sd_nm
         Initial standard deviation of each map coefficient about the calibration map, in Nm
-        of ripple (the load terms: at rated torque); the warm start's confidence (chosen on
-        calibration).
+        of ripple (the load terms: at rated torque); the warm start's confidence (0.0446: the
+        tuning protocol's).
     floor_sd_nm
         Standard deviation of the stabilising floor the forgetting tends to, in the same
         units: how strongly an unexcited coefficient is held near the calibration map.
@@ -136,13 +137,13 @@ class AngleAdaptive(Method):
 
     name = "angle-adaptive"
     description = ("an angle-indexed ripple map warm-started from calibration, adapted online by RLS"
-                   " (memory_revs=30.0), re-homed on the index pulse")
+                   " (memory_revs=139.0), re-homed on the index pulse")
     #: ranges of the tuning protocol (rippleb/tuning.py)
     tunable = {"memory_revs": (3.0, 300.0, "log"), "prior_sd_nm": (0.03, 3.0, "log"),
                "min_counts": (1, 5, "int")}
 
-    def __init__(self, orders: tuple = (1, 2, 4, 6, 8), memory_revs: float = 30.0,
-                 prior_sd_nm: float = 0.3, floor_sd_nm: float = 1.0, min_counts: int = 2,
+    def __init__(self, orders: tuple = (1, 2, 4, 6, 8), memory_revs: float = 139.0,
+                 prior_sd_nm: float = 0.0446, floor_sd_nm: float = 1.0, min_counts: int = 2,
                  update_ticks: int = 10, outlier_gate: float = 4.0, max_jolt_counts: int = 2,
                  adapt: bool = True):
         self.orders = orders

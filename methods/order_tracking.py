@@ -235,11 +235,11 @@ class OrderTracking(Method):
 
     name = "order-tracking"
     description = ("the paper: strain re-sampled at encoder positions, notches at orders 2, 4, 8 "
-                   "(q=30.0), dead zone, back propagation")
+                   "(q=30.5), dead zone, back propagation")
     #: ranges of the tuning protocol (rippleb/tuning.py)
     tunable = {"q": (5.0, 50.0, "log"), "stop_after_s": (0.0005, 0.005, "log")}
 
-    def __init__(self, q: float = 30.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.0015,
+    def __init__(self, q: float = 30.5, orders: tuple = (2, 4, 8), stop_after_s: float = 0.00394,
                  dead_zone: bool = True, back_propagation: bool = True):
         self.q = q
         self.orders = orders
@@ -353,7 +353,7 @@ class OrderTrackingNoDeadzone(OrderTracking):
     description = ("order-tracking without its dead zone: holds the last filtered value during stops"
                    " (dead_zone=false)")
 
-    def __init__(self, q: float = 30.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.0015,
+    def __init__(self, q: float = 30.5, orders: tuple = (2, 4, 8), stop_after_s: float = 0.00394,
                  dead_zone: bool = False, back_propagation: bool = True):
         super().__init__(q=q, orders=orders, stop_after_s=stop_after_s, dead_zone=dead_zone,
                          back_propagation=back_propagation)
@@ -366,7 +366,7 @@ class OrderTrackingNoBackprop(OrderTracking):
     description = ("order-tracking without back propagation: restarts its notches in steady state "
                    "(back_propagation=false)")
 
-    def __init__(self, q: float = 30.0, orders: tuple = (2, 4, 8), stop_after_s: float = 0.0015,
+    def __init__(self, q: float = 9.77, orders: tuple = (2, 4, 8), stop_after_s: float = 0.00321,
                  dead_zone: bool = True, back_propagation: bool = False):
         super().__init__(q=q, orders=orders, stop_after_s=stop_after_s, dead_zone=dead_zone,
                          back_propagation=back_propagation)

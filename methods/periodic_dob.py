@@ -90,8 +90,9 @@ class PeriodicDOB(HomedMapMethod):
     Parameters
     ----------
     bins
-        Angle bins per wave-generator turn (the delay line's length ``N``); 1250 bins of 2
-        counts hold order 8 with 156 bins per period (tuned on calibration).
+        Angle bins per wave-generator turn (the delay line's length ``N``); 2010 bins
+        (the one tuning protocol's, ``methods/tuning.json``) hold order 8 with 251 bins
+        per period.
     memory_revs
         Forgetting of the periodic filter in passes over a bin: ``lam = exp(-1 /
         memory_revs)``; the comb's teeth are about ``1 / (pi memory_revs)`` orders wide
@@ -105,12 +106,12 @@ class PeriodicDOB(HomedMapMethod):
 
     name = "periodic-dob"
     description = ("a periodic-disturbance observer whose delay is one encoder turn: a comb over "
-                   "bins=1250 angle bins on strain minus a nominal torque (Muramatsu & Katsura)")
+                   "bins=2010 angle bins on strain minus a nominal torque (Muramatsu & Katsura)")
     #: constructor parameters worth tuning and their ranges (for a tuner shared by all methods)
     tunable = {"bins": (50, 2500, "int"), "memory_revs": (1.0, 300.0, "log"),
                "nominal_hz": (0.5, 100.0, "log")}
 
-    def __init__(self, bins: int = 1250, memory_revs: float = 100.0, nominal_hz: float = 30.0,
+    def __init__(self, bins: int = 2010, memory_revs: float = 206.0, nominal_hz: float = 94.6,
                  warm_start: bool = True):
         self.bins = bins
         self.memory_revs = memory_revs

@@ -1,34 +1,56 @@
-"""One tuning protocol for every method: its declared ranges, one sampler, one budget.
+"""One tuning protocol for every method: its declared ranges, one sampler, one budget, one rule.
 
 A method declares the constructor parameters worth tuning and their ranges as a class
 attribute ``tunable = {"param": (low, high, "log" | "linear" | "int"), ...}`` (``{}``:
 nothing to tune, e.g. a method whose parameters come from its sources or are fitted on
 the calibration log). :func:`candidates` turns a declaration into the same number of
 points for every method: the default, then ``budget - 1`` points of a scrambled Sobol
-sequence (``scipy.stats.qmc``, seeded, so the points re-run) mapped onto the ranges. The
-tuner (``benchmarks/tune_all.py``) scores each point on the ``calibration`` scenario only,
-against its ``torque_ref`` (the only torque a real calibration knows), and reports the
-best; the budget is the number of calibration evaluations per method, whatever the
-method. docs/tuning.md says what it found.
+sequence (``scipy.stats.qmc``, seeded, so the points re-run) mapped onto the ranges and
+rounded to three significant digits (a value a page can quote and a constructor default
+can hold exactly). ``rippleb tune`` (:mod:`rippleb.engine.tuner`) scores each point on
+the ``calibration`` scenario only, against its ``torque_ref`` (the only torque a real
+calibration knows), on every tuning device; :func:`replaces_default` is the rule that
+decides whether the best point becomes the default. The record of the built-ins' tuning
+ships beside them (:data:`RECORD`, ``methods/tuning.json``, written by ``rippleb tune``);
+the built-ins' defaults are its adopted points (``tests/test_tuning.py``), and every run's
+provenance carries its :func:`summary`. docs/tuning.md says what it found.
 
 Examples
 --------
 >>> points = candidates({"q": (1.0, 100.0, "log")}, {"q": 30.0}, budget=4)
 >>> len(points), points[0]
 (4, {'q': 30.0})
+>>> replaces_default([1.0, 2.0, 3.0], [0.9, 1.9, 2.9]), replaces_default([1.0, 2.0], [0.5, 2.1])
+(True, False)
 """
 
 from __future__ import annotations
+
+import hashlib
+import json
+from importlib import resources
 
 import numpy as np
 
 KINDS = ("log", "linear", "int")
 #: The seed of the Sobol scrambling: every method sees the same sequence of unit points.
 SEED = 33
+#: Calibration evaluations per method (the default and 15 Sobol points); docs/tuning.md.
+BUDGET = 16
+#: The tuning devices: seeds no published row uses (those are 0-19), one calibration log each.
+SEEDS = (100, 101, 102, 103, 104)
+CRITERION = ("mean rms_error_ref_nm (against torque_ref) of the method fitted on the calibration "
+             "log of each tuning device and run on that same log")
+RULE = ("the point of lowest mean replaces the default only when it is better on every tuning "
+        "device (paired); otherwise the default stays")
+#: The record of the built-ins' tuning, in the methods package.
+RECORD = "tuning.json"
 
 
 def check_tunable(name: str, tunable: dict) -> None:
     """Refuse a malformed ``tunable`` declaration with one line naming the method."""
+    if not isinstance(tunable, dict):
+        raise ValueError(f"{name}.tunable must be a dict of ranges, got {type(tunable).__name__}")
     for param, spec in tunable.items():
         if not (isinstance(spec, tuple) and len(spec) == 3 and spec[2] in KINDS and spec[0] < spec[1]):
             raise ValueError(f"{name}.tunable[{param!r}] must be (low, high, one of {KINDS}) with low < high, "
@@ -56,9 +78,44 @@ def candidates(tunable: dict, defaults: dict, budget: int) -> list[dict]:
 
 
 def _scale(u: float, low: float, high: float, kind: str):
-    """A unit coordinate ``u`` in [0, 1) onto the range."""
-    if kind == "log":
-        return float(np.exp(np.log(low) + u * (np.log(high) - np.log(low))))
+    """A unit coordinate ``u`` in [0, 1) onto the range, three significant digits."""
     if kind == "int":
         return int(low + np.floor(u * (high - low + 1)))
-    return float(low + u * (high - low))
+    if kind == "log":
+        value = float(np.exp(np.log(low) + u * (np.log(high) - np.log(low))))
+    else:
+        value = float(low + u * (high - low))
+    return min(max(float(f"{value:.3g}"), low), high)
+
+
+def replaces_default(default_scores, best_scores) -> bool:
+    """:data:`RULE`: the best point is better than the default on every tuning device."""
+    default_scores, best_scores = np.asarray(default_scores), np.asarray(best_scores)
+    return bool(len(best_scores) and np.all(best_scores < default_scores))
+
+
+def best_of(tried: list[tuple[dict, list[float]]]) -> int:
+    """Index of the point of lowest mean score (the earliest of equals); ``tried[0]`` is the default."""
+    means = [float(np.mean(scores)) for _, scores in tried]
+    return int(np.argmin(means))
+
+
+def read_record(text: str | None = None) -> dict:
+    """The record of the built-ins' tuning (``methods/tuning.json``), or one given as text."""
+    if text is None:
+        text = resources.files("rippleb.methods").joinpath(RECORD).read_text()
+    return json.loads(text)
+
+
+def summary() -> dict:
+    """What a run's provenance keeps of the built-ins' tuning: the protocol, each method's
+    adopted point and whether it replaced the default, and the record's hash."""
+    try:
+        text = resources.files("rippleb.methods").joinpath(RECORD).read_text()
+    except (OSError, ModuleNotFoundError) as exc:
+        return {"error": f"no tuning record: {exc}"}
+    record = read_record(text)
+    return {"sha256": hashlib.sha256(text.encode()).hexdigest(), "protocol": record["protocol"],
+            "methods": {name: {k: entry.get(k) for k in ("adopted", "replaced", "evaluations",
+                                                           "default_score", "best_score", "note")}
+                        for name, entry in record["methods"].items()}}

@@ -21,6 +21,13 @@ SPEC = JointSpec()
 CPR = int(SPEC.counts_per_rev)
 
 
+#: The online law's convergence is a property of its memory and prior, tested here at the
+#: settings before the tuning protocol (30 revolutions, 0.3 Nm). The protocol's adopted
+#: defaults (139 revolutions, 0.0446 Nm; methods/tuning.json) learn about 5x more slowly:
+#: these maps are then only partly relearned in 6 s (docs/tuning.md).
+FAST_LEARNING = {"memory_revs": 30.0, "prior_sd_nm": 0.3}
+
+
 def index_from_counts(encoder: np.ndarray, index_count: int) -> np.ndarray:
     """1 where the count crosses ``index_count`` modulo a revolution (a fixed motor angle)."""
     rev = np.floor_divide(encoder - index_count, CPR)
@@ -99,7 +106,7 @@ def test_adaptation_converges_from_a_wrong_map():
     earlier tick in the second difference, not slow convergence (it stays flat over 100
     revolutions)."""
     start, truth = random_map(1), random_map(2)
-    method = AngleAdaptive()
+    method = AngleAdaptive(**FAST_LEARNING)
     method.fit(synthetic_log(start).for_method(keep_ref=True))
     log = synthetic_log(truth, seconds=6.0)
     estimate = run(method, log, size=int(SPEC.fs))
@@ -161,7 +168,7 @@ def test_without_index_a_shifted_map_is_relearned():
     shifted = dataclasses.replace(log, encoder=log.encoder + 611)
     errors = {}
     for cls in (AngleAdaptive, AngleAdaptiveFrozen):
-        method = cls()
+        method = cls(**FAST_LEARNING)
         method.fit(calibration.for_method(keep_ref=True))
         errors[cls.name] = np.std((run(method, shifted, size=int(SPEC.fs)) - log.torque_true)[-20000:])
     assert errors["angle-adaptive"] < 0.2 * errors["angle-adaptive-frozen"]

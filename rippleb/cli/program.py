@@ -1,4 +1,4 @@
-"""The ``rippleb`` command: ``list``, ``run``, ``sweep``, ``simulate``, ``report``, ``check``.
+"""The ``rippleb`` command: ``list``, ``run``, ``sweep``, ``simulate``, ``report``, ``check``, ``tune``.
 
 Built on argparse (standard library, no extra dependency; subcommands and ``--help``
 are all this CLI needs). Every :class:`~rippleb.errors.RipplebError` becomes one line
@@ -7,7 +7,7 @@ are all this CLI needs). Every :class:`~rippleb.errors.RipplebError` becomes one
 finished rows are.
 
 This module is the program (:func:`entry`, :func:`main`, the parser); each subcommand is
-a module of :mod:`rippleb.cli` (``run``, ``sweep``, ``simulate``, ``report``, ``list``, ``check``),
+a module of :mod:`rippleb.cli` (``run``, ``sweep``, ``simulate``, ``report``, ``list``, ``check``, ``tune``),
 and the options they share are in :mod:`rippleb.cli.options`.
 """
 
@@ -27,6 +27,7 @@ from rippleb.cli.report import add_report
 from rippleb.cli.run import add_run
 from rippleb.cli.simulate import add_simulate
 from rippleb.cli.sweep import add_sweep
+from rippleb.cli.tune import add_tune
 from rippleb.errors import RipplebError
 from rippleb.printable import escaped
 
@@ -147,4 +148,5 @@ def build_parser() -> argparse.ArgumentParser:
     add_simulate(sub)
     add_report(sub)
     add_check(sub)
+    add_tune(sub)
     return parser

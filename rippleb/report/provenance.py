@@ -36,13 +36,15 @@ def collect_provenance(argv=None) -> dict:
 
     from rippleb.version import __version__
     from rippleb.engine.results import system_info
+    from rippleb.tuning import summary as tuning_summary
 
     return {"command": shlex.join(["rippleb", *(sys.argv[1:] if argv is None else argv)]),
             "cwd": os.getcwd(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "rippleb_version": __version__, **git_state(),
             "python": platform.python_version(), "numpy": numpy.__version__, "scipy": scipy.__version__,
             "pinocchio": _pinocchio_version(), "platform": platform.platform(terse=True),
-            "cpu": system_info()["cpu"], "cpu_count": os.cpu_count(), **environment()}
+            "cpu": system_info()["cpu"], "cpu_count": os.cpu_count(), **environment(),
+            "tuning": tuning_summary()}
 
 
 def environment() -> dict:

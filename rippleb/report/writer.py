@@ -29,6 +29,7 @@ from rippleb.metrics import METRIC_COLUMNS
 from rippleb.truthfree import TRUTH_FREE_COLUMNS
 from rippleb.engine.results import RunWarning, copy_rows, row_key, swept_columns
 from rippleb.engine.sealing import sealed_text
+from rippleb.report.tuning_table import tuning_markdown
 from rippleb.report.verdicts import method_verdicts
 from rippleb.report.stats import (CONFIDENCE, METHOD_ORDER, fmt_interval, interval_frame,  # noqa: F401
                            method_order, scenario_order, t_interval, with_condition)
@@ -272,6 +273,9 @@ def readme_markdown(frame, prov: dict, figures: dict, *, published: bool = False
         parts += ["", prov.get("sealed") or sealed_text(frame, prov.get("run", {}))]
     parts += ["", READING_RECORDED if recorded else READING_SIMULATED]
     parts += ["", tables_markdown(frame)]
+    if not recorded:
+        parts += ["", "## How each method was tuned", "",
+                  tuning_markdown(prov.get("run", {}).get("tuning"), method_order(frame["method"]))]
     if "us_per_tick_p99" in frame:
         parts += ["", "## How timing was taken", "", timing_note(prov, frame)]
     if figures:

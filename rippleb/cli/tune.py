@@ -1,0 +1,117 @@
+"""``rippleb tune``: the one tuning protocol (:mod:`rippleb.tuning`) on installed methods.
+
+Every method gets the same budget of calibration evaluations, on the ``calibration``
+scenario of the tuning devices only, scored against ``torque_ref``; the record (JSON, one
+entry per method, written as each finishes) says every point tried, its score on each
+device, the best point and whether the rule lets it replace the default. The built-ins'
+record is ``methods/tuning.json`` (docs/tuning.md). Methods run in this process's
+workers, unsandboxed, as ``rippleb check`` runs them: tune only methods you trust.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+
+from rippleb.errors import InputError
+from rippleb.tuning import BUDGET, CRITERION, RULE, SEED, SEEDS
+
+
+def add_tune(sub) -> None:
+    p = sub.add_parser(
+        "tune", help="tune methods by the one protocol: same budget, calibration scenario only",
+        description="Tune methods' declared parameters (their 'tunable' ranges) by one protocol: the "
+                    f"default and budget-1 Sobol points (seed {SEED}), each fitted and run on the "
+                    "calibration log of each tuning device and scored against torque_ref (never a "
+                    f"scored scenario, never torque_true). Rule: {RULE}. Prints one line per method "
+                    "and writes the record as JSON (docs/tuning.md).")
+    p.add_argument("--methods", help="comma-separated method names (default: every built-in)")
+    p.add_argument("--budget", type=int, default=BUDGET,
+                   help=f"calibration evaluations per method (default {BUDGET}, the built-ins' budget)")
+    p.add_argument("--seeds", default=f"{SEEDS[0]}-{SEEDS[-1]}",
+                   help=f"tuning devices: 'A-B' or 'A,B,C' (default {SEEDS[0]}-{SEEDS[-1]}, devices no "
+                        "published row uses)")
+    p.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                   help=f"points evaluated in parallel processes (default: the number of CPUs, {os.cpu_count()} here)")
+    p.add_argument("--out", type=Path, help="JSON file for the record (written after each method)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_tune)
+
+
+def cmd_tune(args) -> int:
+    """``rippleb tune``."""
+    from tqdm import tqdm
+
+    from rippleb.engine.tuner import plan, tune
+    from rippleb.registry import Registry
+    from rippleb.version import __version__
+
+    seeds = parse_seeds(args.seeds)
+    if args.budget < 1:
+        raise InputError(f"--budget must be at least 1, got {args.budget}")
+    if args.jobs < 1:
+        raise InputError(f"--jobs must be at least 1, got {args.jobs}")
+    registry = Registry.discover()
+    names = ([n.strip() for n in args.methods.split(",") if n.strip()] if args.methods
+             else registry.names("builtin"))
+    for name in names:
+        registry.get(name)  # an unknown name: one line, before any work
+    if args.out is not None and args.out.is_dir():
+        raise InputError(f"--out {args.out}: is a directory; give a file name (e.g. {args.out / 'tuning.json'})")
+    total = sum(len(points) for _, points, _ in plan(names, registry, args.budget).values())
+    record = {"protocol": {"budget": args.budget, "seeds": seeds, "criterion": CRITERION, "rule": RULE,
+                           "sampler": f"the default, then budget-1 points of a scrambled Sobol sequence "
+                                      f"(scipy.stats.qmc, seed {SEED}), 3 significant digits"},
+              "rippleb_version": __version__, "methods": {}}
+    print(f"rippleb tune: {len(names)} method(s), budget {args.budget}, {total} evaluations on the "
+          f"calibration logs of seeds {args.seeds}, {args.jobs} job(s)", file=sys.stderr, flush=True)
+    with tqdm(total=total, disable=True if args.no_progress else None, file=sys.stderr, unit="point") as bar:
+        def finished(name, entry):
+            record["methods"][name] = entry
+            if args.out is not None:
+                _write(args.out, record)
+            bar.write(line(name, entry))
+
+        tune(names, seeds, args.budget, args.jobs, on_method=finished, on_point=bar.update, registry=registry)
+    if args.out is not None:
+        print(f"record written to {args.out}", file=sys.stderr)
+    return 0
+
+
+def line(name: str, entry: dict) -> str:
+    """One method's result as one line."""
+    if entry["evaluations"] == 1:
+        return f"{name}: {entry['default_score']:.3f} Nm at its defaults; {entry['note']}"
+    verdict = ("replaces the default" if entry["replaced"]
+               else "default kept" + (" (the best point is not better on every device)"
+                                      if entry["best"] != entry["default"] else ""))
+    best = ", ".join(f"{k}={v:g}" for k, v in entry["best"].items())
+    text = (f"{name}: default {entry['default_score']:.3f} Nm, best {entry['best_score']:.3f} Nm at "
+            f"{best} ({entry['evaluations']} evaluations): {verdict}")
+    return text + (f"; {len(entry['errors'])} error(s): {entry['errors'][0]}" if entry["errors"] else "")
+
+
+def parse_seeds(text: str) -> list[int]:
+    """``A-B`` or ``A,B,C`` as a list of seeds; anything else is one line naming ``--seeds``."""
+    try:
+        if "-" in text:
+            lo, hi = (int(v) for v in text.split("-"))
+            seeds = list(range(lo, hi + 1))
+        else:
+            seeds = [int(v) for v in text.split(",")]
+    except ValueError:
+        raise InputError(f"--seeds {text!r}: expected 'A-B' or 'A,B,C' (non-negative integers)") from None
+    if not seeds or min(seeds) < 0:
+        raise InputError(f"--seeds {text!r}: expected at least one non-negative seed")
+    return list(dict.fromkeys(seeds))
+
+
+def _write(path: Path, record: dict) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        tmp.write_text(json.dumps(record, indent=1, sort_keys=False) + "\n")
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise InputError(f"--out {path}: cannot write the record: {exc.strerror or exc}") from None

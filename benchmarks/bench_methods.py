@@ -1,6 +1,8 @@
 """Cost of every built-in method's ``step``, as ratios to ``lfilter`` and ``raw`` in one run.
 
-Run with ``python -m pytest benchmarks/bench_methods.py --benchmark-enable -s``.
+Run with ``python -m pytest benchmarks/bench_methods.py --benchmark-enable -n 0 -s``
+(``-n 0``: one process; under the suite's default ``-n auto`` pytest-benchmark disables
+itself, the workers time each other's load and ``-s`` prints nothing).
 
 Per tick (``test_step_per_tick``): the 20-sample blocks (one 1 kHz tick at 20 kHz) of
 ``paper-quintic`` seeds 901-902 (rest, a whole move through all speeds, rest), in time

@@ -37,7 +37,8 @@ Ticks are cut on absolute sample indices (every ``tick`` samples since :meth:`re
 not on block boundaries, so the output does not depend on how the stream is cut. Each
 sample's output is the posterior torque of the latest complete tick (held), extrapolated
 with the torque rate when the state has one. The compiled filter (``kf_step``,
-``filter_ticks``, ``kf_run_batch``) is in ``_kalman_ripple_filter.py`` beside this module.
+``stream_block``, ``kf_run_batch``) is in ``_kalman_ripple_filter.py`` beside this module;
+``step`` is one call of ``stream_block``.
 """
 
 from __future__ import annotations
@@ -48,7 +49,11 @@ from rippleb.data import JointSpec, SensorBlock, SensorLog
 from rippleb.method import Method
 from rippleb.methods._homing import IndexHoming, index_mark
 # the compiled filter lives beside the class; its tick step stays importable from here
-from rippleb.methods._kalman_ripple_filter import filter_ticks, kf_run_batch, kf_step  # noqa: F401
+from rippleb.methods._kalman_ripple_filter import (  # noqa: F401
+    LOGGED, LOGGED_COUNT, RESTART_AT, SAMPLES, kf_run_batch, kf_step, stream_block)
+
+#: the ``index`` of a block without one, or of a run without an index mark: no re-homing
+NO_INDEX = np.zeros(0, dtype=np.int8)
 
 
 def phasor_table(counts_per_rev: int) -> np.ndarray:
@@ -210,98 +215,73 @@ class KalmanRipple(Method):
         if not hasattr(self, "gain_"):
             raise RuntimeError("kalman-ripple needs fit(calibration) before reset")
         self._setup(spec)
+        D = self.tick_
         self.q_tick_ = np.diag(self._q_torque_matrix(self.q_torque_)).copy()
         self.q_turn_ = np.diag(self._q_ripple_matrix(self.q_ripple_)).copy()
         self.x_, self.P_ = self._initial_state()
-        self.pending_strain_ = np.empty(0)
-        self.pending_encoder_ = np.empty(0, dtype=np.int64)
-        self.last_count_ = None  # encoder count at the end of the previous tick
-        self.estimate_ = None  # posterior torque and torque rate of the latest tick
-        self.since_tick_ = 0  # samples since the end of the last tick
         self.homing_ = IndexHoming(mark=getattr(self, "index_mark_", None),
                                    counts_per_rev=int(spec.counts_per_rev))
-        self.samples_ = 0      # absolute index of the next sample
-        self.restart_at_ = None  # pulse sample at which the map restarts (first homing)
+        # the state of stream_block (positions named in _kalman_ripple_filter.py): the
+        # samples of the open tick, counters (no tick yet, no map restart pending) and
+        # constants with the latest posterior torque and rate
+        self.counters_ = np.zeros(LOGGED + 1, dtype=np.int64)
+        self.counters_[RESTART_AT] = -1
+        self.scalars_ = np.array([self.gain_ / D, self.offset_, self.r_, float(spec.fs),
+                                  0.5 * (D - 1), 0.0, 0.0])
+        maps = np.stack([self.c0_, self.c1_, self.c2_])
+        noise = np.stack([self.q_tick_, self.q_turn_])
+        self.stream_state_ = (np.zeros(D), np.zeros(D, dtype=np.int64), self.orders_, self.table_,
+                              maps, noise, self.F_, self.x_, self.P_, self.counters_, self.scalars_)
 
     def step(self, block: SensorBlock) -> np.ndarray:
         """One torque estimate [Nm] per sample: the latest tick's posterior, held."""
-        first = len(self.pending_strain_)  # position of block[0] in the joined arrays
-        counts, pulse = self.homing_.counts(block.encoder, block.index, self.samples_)
-        if pulse is not None:   # first homing of the run moved the frame
-            self.restart_at_ = pulse
-        strain = np.concatenate([self.pending_strain_, block.strain])
-        encoder = np.concatenate([self.pending_encoder_, counts])
-        encoder = encoder.astype(np.int64, copy=False)
-        D = self.tick_
-        done = len(strain) // D
-        out = np.empty(len(block))
-        cursor = 0
-        if done:
-            ticks = encoder[:done * D].reshape(done, D)
-            y = self.gain_ / D * strain[:done * D].reshape(done, D).sum(axis=1) + self.offset_
-            start = ticks[0, 0] if self.last_count_ is None else self.last_count_
-            posterior = np.empty((done, 2))
-            # the tick whose last sample reaches the first homing pulse restarts the map first
-            ends = self.samples_ + np.arange(1, done + 1) * D - 1 - first
-            split = done if self.restart_at_ is None else int(np.searchsorted(ends, self.restart_at_))
-            self._filter(ticks[:split], y[:split], start, posterior[:split])
-            if split < done:
-                self._restart_map()
-                before = ticks[split - 1, -1] if split else start
-                self._filter(ticks[split:], y[split:], before, posterior[split:])
-            self.last_count_ = ticks[-1, -1]
-        for j in range(done):
-            last = (j + 1) * D - 1 - first  # block index of the sample that ends tick j
-            self._fill(out, block, counts, cursor, last)
-            self.estimate_ = posterior[j]
-            self.since_tick_ = 0
-            cursor = last
-        self._fill(out, block, counts, cursor, len(block))
-        self.samples_ += len(block)
-        self.pending_strain_ = strain[done * D:]
-        self.pending_encoder_ = encoder[done * D:]
+        out = np.empty(len(block.strain))
+        homing = self.homing_
+        index = NO_INDEX if block.index is None or homing.mark is None else block.index
+        try:
+            cold = stream_block(block.strain, block.encoder, homing.shift, index, out,
+                                *self.stream_state_)
+        except TypeError:   # columns of other dtypes than a log's: as a log holds them
+            block, index = self._as_logged(block, index)
+            cold = stream_block(block.strain, block.encoder, homing.shift, index, out,
+                                *self.stream_state_)
+        counts = None
+        if cold < 0:   # an index pulse in the block: re-home its counts, then filter them
+            counts = self._rehome(block)
+            cold = stream_block(block.strain, counts, 0, NO_INDEX, out, *self.stream_state_)
+            self.counters_[LOGGED_COUNT] = block.encoder[-1]
+        if cold:       # before the first tick of the run ends
+            if counts is None:
+                counts = block.encoder[:cold] - homing.shift
+            self._before_first_tick(out[:cold], block.strain[:cold], counts[:cold])
         return out
 
-    def _filter(self, ticks, y, before, posterior) -> None:
-        """:func:`filter_ticks` on this filter's state (``before``: the count that preceded)."""
-        if len(ticks):
-            filter_ticks(ticks, y, before, self.orders_, self.table_, self.c1_, self.c2_, self.F_,
-                         self.torque_rate, self.q_tick_, self.q_turn_, self.r_, self.x_, self.P_,
-                         posterior)
+    @staticmethod
+    def _as_logged(block: SensorBlock, index):
+        """``block`` with the dtypes of a log's columns (float strain, int64 counts, int8
+        index), and its index (``NO_INDEX`` stays)."""
+        block = SensorBlock(block.t, np.asarray(block.strain, dtype=float),
+                            np.asarray(block.encoder, dtype=np.int64), block.current,
+                            None if block.index is None else (block.index != 0).astype(np.int8))
+        return block, (index if index is NO_INDEX else block.index)
 
-    def _restart_map(self) -> None:
-        """Ripple coefficients back to the calibrated map and its covariance."""
-        x0, P0 = self._initial_state()
-        m = self.n_torque_
-        self.x_[m:] = x0[m:]
-        self.P_[m:, :] = 0.0
-        self.P_[:, m:] = 0.0
-        self.P_[m:, m:] = P0[m:, m:]
-        self.restart_at_ = None
+    def _rehome(self, block: SensorBlock) -> np.ndarray:
+        """The block's counts in the calibration frame (:class:`IndexHoming`); the first
+        homing of a run that moves the frame restarts the map at the tick that reaches it."""
+        counters = self.counters_
+        # stream_block keeps the last logged count; the homing needs it for a pulse at 0
+        self.homing_.last = int(counters[LOGGED_COUNT]) if counters[LOGGED] else None
+        counts, pulse = self.homing_.counts(block.encoder, block.index, int(counters[SAMPLES]))
+        if pulse is not None:
+            counters[RESTART_AT] = pulse
+        return np.asarray(counts, dtype=np.int64)
 
-    def _fill(self, out, block, counts, start, stop):
-        """Write the current estimate to ``out[start:stop]`` (``counts``: the block's
-        encoder in the calibration frame).
-
-        The sample that ends a tick already gets that tick's posterior: the tick uses
-        only samples up to and including it.
-        """
-        if stop <= start:
-            return
-        if self.estimate_ is None:
-            # before the first tick ends: strain in Nm minus the no-load ripple, per sample
-            phase = self.table_[(counts[start:stop, None] * self.orders_) % len(self.table_)]
-            ripple = phase.real @ self.c0_[0::2] + phase.imag @ self.c0_[1::2]
-            out[start:stop] = self.gain_ * block.strain[start:stop] + self.offset_ - ripple
-            return
-        if self.torque_rate:
-            # the tick mean estimates the torque at the tick centre, (D - 1) / 2 samples
-            # before the tick's last sample; extrapolate from there on absolute indices
-            k = self.since_tick_ + np.arange(stop - start) + 0.5 * (self.tick_ - 1)
-            out[start:stop] = self.estimate_[0] + self.estimate_[1] * k / self.spec_.fs
-            self.since_tick_ += stop - start
-            return
-        out[start:stop] = self.estimate_[0]
+    def _before_first_tick(self, out, strain, counts) -> None:
+        """Strain in Nm minus the no-load ripple at each sample's count, in place of an
+        estimate before the first tick ends."""
+        phase = self.table_[(counts[:, None] * self.orders_) % len(self.table_)]
+        ripple = phase.real @ self.c0_[0::2] + phase.imag @ self.c0_[1::2]
+        out[:] = self.gain_ * strain + self.offset_ - ripple
 
     # -------------------------------------------------------------- helpers
     def _setup(self, spec):

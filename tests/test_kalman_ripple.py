@@ -5,10 +5,13 @@ wave-generator angle and white noise, so that the filter can be checked against 
 without the simulator; the conformance and filterpy checks use simulated logs.
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from rippleb import JointSpec, make_log, read_log, write_log
+from rippleb.methods._kalman_ripple_filter import pairwise_sum
 from rippleb.methods.kalman_ripple import KalmanRipple, kf_step, phasor_table, tick_regressors
 
 SPEC = JointSpec()
@@ -103,6 +106,29 @@ def test_output_does_not_depend_on_block_cutting(fitted):
     base = estimate(fitted, log)
     for size in (1, 7, 33, 1000):
         np.testing.assert_allclose(estimate(fitted, log, size), base, rtol=0, atol=1e-9)
+
+
+def test_columns_of_other_dtypes_give_the_same_estimate(fitted):
+    """A block of int32 counts and float32 strain (not a log's dtypes) is filtered as the
+    log's columns would be."""
+    log = synthetic_move(duration=0.2).for_method(keep_ref=False)
+    base = estimate(fitted, log)
+    fitted.reset(log.spec)
+    other = [dataclasses.replace(b, encoder=b.encoder.astype(np.int32)) for b in log.blocks()]
+    np.testing.assert_array_equal(np.concatenate([fitted.step(b) for b in other]), base)
+    fitted.reset(log.spec)
+    assert len(fitted.step(dataclasses.replace(other[0], strain=other[0].strain[:0],
+                                               encoder=other[0].encoder[:0]))) == 0
+
+
+@pytest.mark.parametrize("n", [1, 3, 7, 8, 9, 16, 20, 23, 100, 128, 129, 200, 257, 1000])
+def test_pairwise_sum_is_numpys_sum_bit_for_bit(n):
+    """The tick means of the compiled step equal numpy's ``sum(axis=1)`` they replaced."""
+    rng = np.random.default_rng(n)
+    a = rng.normal(size=3 * n) * 10.0 ** rng.integers(-4, 5, size=3 * n)
+    rows = a.reshape(3, n).sum(axis=1)
+    assert [0.0 + pairwise_sum(a, j * n, n) for j in range(3)] == list(rows)
+    assert np.signbit(0.0 + pairwise_sum(np.array([-0.0]), 0, 1)) == np.signbit(np.sum([-0.0]))
 
 
 def test_reset_before_fit_is_refused():

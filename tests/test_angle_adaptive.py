@@ -23,7 +23,7 @@ CPR = int(SPEC.counts_per_rev)
 
 #: The online law's convergence is a property of its memory and prior, tested here at the
 #: settings before the tuning protocol (30 revolutions, 0.3 Nm). The protocol's adopted
-#: defaults (139 revolutions, 0.0446 Nm; methods/tuning.json) learn about 5x more slowly:
+#: defaults (139 revolutions, 0.0446 Nm; methods/tuning.json) learn more slowly:
 #: these maps are then only partly relearned in 6 s (docs/tuning.md).
 FAST_LEARNING = {"memory_revs": 30.0, "prior_sd_nm": 0.3}
 

@@ -36,10 +36,13 @@ def tuning_markdown(tuning: dict | None, methods) -> str:
         adopted = ", ".join(f"`{k}` = {v:g}" for k, v in (entry.get("adopted") or {}).items()) or "-"
         if entry.get("evaluations", 0) <= 1:
             verdict = entry.get("note") or "nothing to tune"
+        elif entry.get("replaced"):
+            verdict = "the best point replaced the default"
         else:
-            verdict = "tuned value replaces the default" if entry.get("replaced") else "default kept"
+            verdict = "default kept (no point better on every device)"
         rows.append([f"`{name}`", verdict, adopted, _nm(entry.get("default_score")), _nm(entry.get("best_score"))])
-    return "\n".join([intro, "", markdown(rows, ["method", "tuning", "values used", "default's score [Nm]",
+    return "\n".join([intro, "", markdown(rows, ["method", "tuning", "values used",
+                                                  "score at the former default [Nm]",
                                                   "best point's score [Nm]"])])
 
 

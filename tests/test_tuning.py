@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
-from rippleb.engine.tuner import entry
+from rippleb.engine.tuner import entry, plan
+from rippleb.errors import PluginError
 from rippleb.registry import Registry
 from rippleb.report.tuning_table import tuning_markdown
 from rippleb.tuning import BUDGET, SEEDS, candidates, check_tunable, read_record, replaces_default, summary
@@ -150,3 +151,41 @@ def test_bad_tune_options_are_one_line_exit_2(args, message):
     proc = _tune(*args)
     assert proc.returncode == 2 and message in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+
+
+class _Entry:
+    def __init__(self, cls):
+        self.cls = cls
+
+    def load(self):
+        return self.cls
+
+
+class _Registry:
+    def __init__(self, **classes):
+        self.classes = classes
+
+    def get(self, name):
+        return _Entry(self.classes[name])
+
+
+@pytest.mark.parametrize("tunable, message", [
+    ({"q": (1, 2)}, r"cannot tune 'bad': ValueError: bad\.tunable\['q'\]"),
+    ({"nope": (1.0, 2.0, "log")}, "get_params"),
+])
+def test_a_plugin_that_cannot_be_tuned_is_one_line_naming_it(tunable, message):
+    from rippleb.methods.raw import Raw
+
+    bad = type("Bad", (Raw,), {"tunable": tunable})
+    with pytest.raises(PluginError, match=message):
+        plan(["bad"], _Registry(bad=bad), 4)
+
+
+def test_a_plugin_without_ranges_is_scored_at_its_defaults_once():
+    from rippleb.methods.raw import Raw
+
+    plain = type("Plain", (Raw,), {})                                    # raw's tunable = {}
+    undeclared = type("Undeclared", (), {"get_params": lambda self: {}})  # no tunable at all
+    planned = plan(["plain", "undeclared"], _Registry(plain=plain, undeclared=undeclared), 16)
+    assert planned["plain"][1] == [{}] and "nothing to tune" in planned["plain"][2]
+    assert planned["undeclared"][1] == [{}] and "no tunable ranges" in planned["undeclared"][2]

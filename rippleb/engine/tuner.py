@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 
+from rippleb.errors import PluginError
 from rippleb.metrics import Truth, score
 from rippleb.registry import Registry
 from rippleb.simulator import simulate
@@ -74,8 +75,15 @@ def plan(names, registry: Registry, budget: int) -> dict[str, tuple[dict, list[d
         tunable = getattr(cls, "tunable", None)
         note = UNDECLARED if tunable is None else (NOTHING if not tunable else "")
         tunable = tunable or {}
-        check_tunable(name, tunable)
-        out[name] = (tunable, candidates(tunable, cls().get_params(), budget), note)
+        try:
+            check_tunable(name, tunable)
+            defaults = cls().get_params()
+            missing = sorted(set(tunable) - set(defaults))
+            if missing:
+                raise ValueError(f"{name}.tunable names {', '.join(missing)}, which get_params() does not return")
+        except Exception as exc:  # noqa: BLE001 - a plugin's class may raise anything
+            raise PluginError(f"cannot tune {name!r}: {type(exc).__name__}: {exc}".splitlines()[0]) from None
+        out[name] = (tunable, candidates(tunable, defaults, budget), note)
     return out
 
 

@@ -54,6 +54,17 @@ def test_page_is_self_contained_with_tables_per_condition_and_headline(tmp_path)
     assert "The lowest mean depends on the condition" in page
     assert page.count('class="sortable"') == 4  # summary, two conditions, provenance
     assert "report of <code>runs/x</code>" in page
+    assert "How each method was tuned" in page and "Not recorded" in page
+
+
+def test_page_shows_the_tuning_the_run_recorded(tmp_path):
+    from rippleb.tuning import read_record, summary
+
+    prov = {**PROV, "run": {**PROV["run"], "tuning": summary()}}
+    page = html_report.write_html(conditions_frame(), prov, tmp_path / "index.html").read_text()
+    adopted = read_record()["methods"]["order-tracking"]["adopted"]
+    assert page.count('class="sortable"') == 5  # and the tuning table
+    assert f"`q` = {adopted['q']:g}" in page   # table cells are plain text
 
 
 def test_hover_of_every_row_names_method_scenario_condition_and_seed(tmp_path):

@@ -118,7 +118,7 @@ def test_a_run_records_the_tuning_and_its_report_prints_it():
     recorded = summary()
     assert recorded["protocol"] == RECORD["protocol"] and len(recorded["sha256"]) == 64
     text = tuning_markdown(recorded, ["order-tracking", "raw", "order-tracking[q=20]", "my-plugin"])
-    assert f"budget of **{BUDGET} calibration evaluations**" in text
+    assert f"budget of {BUDGET} calibration evaluations" in text
     adopted = RECORD["methods"]["order-tracking"]["adopted"]
     assert f"`q` = {adopted['q']:g}" in text
     assert "a variant" in text and "not in the built-ins' record" in text

@@ -109,6 +109,12 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
         body += [f"<h2>All metrics under <code>{html.escape(condition)}</code></h2>",
                  '<p class="note">Mean ± 95 % t-interval over seeds; click a header to sort.</p>',
                  _metrics_table(frame[frame["condition"] == condition])]
+    if not recorded:
+        from rippleb.report.tuning_table import tuning_parts
+
+        intro, table = tuning_parts(prov.get("run", {}).get("tuning"), method_order(frame["method"]))
+        body += ["<h2>How each method was tuned</h2>", f"<p>{_md(intro)}</p>"]
+        body += [_markdown_table(table)] if table else []
     body += ["<h2>Provenance</h2>", _provenance_table(prov)]
     page = ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
             f"<title>{html.escape(title[0].lstrip('# ').replace('`', ''))}</title><script>{ERROR_HOOK}</script>"

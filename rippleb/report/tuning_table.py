@@ -13,13 +13,19 @@ from rippleb.report.markdown import markdown
 
 def tuning_markdown(tuning: dict | None, methods) -> str:
     """The protocol in one paragraph and one table row per method of the report."""
+    intro, table = tuning_parts(tuning, methods)
+    return "\n".join([intro, "", table]) if table else intro
+
+
+def tuning_parts(tuning: dict | None, methods) -> tuple[str, str]:
+    """The paragraph on the protocol, and the Markdown table ('' when nothing is recorded)."""
     if not tuning or "protocol" not in tuning:
         reason = (tuning or {}).get("error", "the run's provenance has no tuning record (an older run)")
-        return f"Not recorded: {reason}."
+        return f"Not recorded: {reason}.", ""
     protocol, record = tuning["protocol"], tuning["methods"]
     seeds = protocol["seeds"]
     intro = (f"One protocol for every built-in (`docs/tuning.md` in the repository): "
-             f"a budget of **{protocol['budget']} calibration evaluations** per method, on the "
+             f"a budget of {protocol['budget']} calibration evaluations per method, on the "
              f"`calibration` scenario of the tuning devices (seeds {seeds[0]}-{seeds[-1]}), never on a "
              f"scored scenario. Points: {protocol['sampler']}. Score: {protocol['criterion']}. "
              f"Rule: {protocol['rule']}. Record `methods/tuning.json`, sha256 "
@@ -41,9 +47,8 @@ def tuning_markdown(tuning: dict | None, methods) -> str:
         else:
             verdict = "default kept (no point better on every device)"
         rows.append([f"`{name}`", verdict, adopted, _nm(entry.get("default_score")), _nm(entry.get("best_score"))])
-    return "\n".join([intro, "", markdown(rows, ["method", "tuning", "values used",
-                                                  "score at the former default [Nm]",
-                                                  "best point's score [Nm]"])])
+    return intro, markdown(rows, ["method", "tuning", "values used", "score at the former default [Nm]",
+                                  "best point's score [Nm]"])
 
 
 def _nm(value) -> str:

@@ -94,24 +94,26 @@ def replaces_default(default_scores, best_scores) -> bool:
     return bool(len(best_scores) and np.all(best_scores < default_scores))
 
 
-def best_of(tried: list[tuple[dict, list[float]]]) -> int:
-    """Index of the point of lowest mean score (the earliest of equals); ``tried[0]`` is the default."""
-    means = [float(np.mean(scores)) for _, scores in tried]
-    return int(np.argmin(means))
+def best_of(scores: list[list[float]]) -> int:
+    """Index of the point of lowest mean score over the devices (the earliest of equals);
+    ``scores[0]`` is the default's."""
+    return int(np.argmin([float(np.mean(s)) for s in scores]))
+
+
+def _record_text() -> str:
+    return resources.files("rippleb.methods").joinpath(RECORD).read_text()
 
 
 def read_record(text: str | None = None) -> dict:
     """The record of the built-ins' tuning (``methods/tuning.json``), or one given as text."""
-    if text is None:
-        text = resources.files("rippleb.methods").joinpath(RECORD).read_text()
-    return json.loads(text)
+    return json.loads(_record_text() if text is None else text)
 
 
 def summary() -> dict:
     """What a run's provenance keeps of the built-ins' tuning: the protocol, each method's
     adopted point and whether it replaced the default, and the record's hash."""
     try:
-        text = resources.files("rippleb.methods").joinpath(RECORD).read_text()
+        text = _record_text()
     except (OSError, ModuleNotFoundError) as exc:
         return {"error": f"no tuning record: {exc}"}
     record = read_record(text)

@@ -56,11 +56,10 @@ def cmd_tune(args) -> int:
     registry = Registry.discover()
     names = ([n.strip() for n in args.methods.split(",") if n.strip()] if args.methods
              else registry.names("builtin"))
-    for name in names:
-        registry.get(name)  # an unknown name: one line, before any work
     if args.out is not None and args.out.is_dir():
         raise InputError(f"--out {args.out}: is a directory; give a file name (e.g. {args.out / 'tuning.json'})")
-    total = sum(len(points) for _, points, _ in plan(names, registry, args.budget).values())
+    planned = plan(names, registry, args.budget)
+    total = sum(len(points) for _, points, _ in planned.values())
     record = {"protocol": {"budget": args.budget, "seeds": seeds, "criterion": CRITERION, "rule": RULE,
                            "sampler": f"the default, then budget-1 points of a scrambled Sobol sequence "
                                       f"(scipy.stats.qmc, seed {SEED}), 3 significant digits"},
@@ -74,7 +73,7 @@ def cmd_tune(args) -> int:
                 _write(args.out, record)
             bar.write(line(name, entry))
 
-        tune(names, seeds, args.budget, args.jobs, on_method=finished, on_point=bar.update, registry=registry)
+        tune(planned, seeds, args.jobs, on_method=finished, on_point=bar.update)
     if args.out is not None:
         print(f"record written to {args.out}", file=sys.stderr)
     return 0
@@ -94,7 +93,10 @@ def line(name: str, entry: dict) -> str:
 
 
 def parse_seeds(text: str) -> list[int]:
-    """``A-B`` or ``A,B,C`` as a list of seeds; anything else is one line naming ``--seeds``."""
+    """``A-B`` or ``A,B,C`` as a list of seeds, checked as a run's seeds are
+    (:func:`~rippleb.engine.rows.select_seeds`); anything else is one line naming ``--seeds``."""
+    from rippleb.engine.rows import select_seeds
+
     try:
         if "-" in text:
             lo, hi = (int(v) for v in text.split("-"))
@@ -103,9 +105,9 @@ def parse_seeds(text: str) -> list[int]:
             seeds = [int(v) for v in text.split(",")]
     except ValueError:
         raise InputError(f"--seeds {text!r}: expected 'A-B' or 'A,B,C' (non-negative integers)") from None
-    if not seeds or min(seeds) < 0:
-        raise InputError(f"--seeds {text!r}: expected at least one non-negative seed")
-    return list(dict.fromkeys(seeds))
+    if not seeds:
+        raise InputError(f"--seeds {text!r}: expected at least one seed")
+    return select_seeds(seeds, 0)
 
 
 def _write(path: Path, record: dict) -> None:

@@ -87,15 +87,13 @@ def plan(names, registry: Registry, budget: int) -> dict[str, tuple[dict, list[d
     return out
 
 
-def tune(names, seeds, budget: int, jobs: int = 1, on_method=None, on_point=None,
-         registry: Registry | None = None) -> dict:
-    """Run the protocol on ``names``; returns ``{name: entry}`` (see docs/tuning.md).
+def tune(planned: dict, seeds, jobs: int = 1, on_method=None, on_point=None) -> dict:
+    """Run the :func:`plan` ``planned`` on the calibration logs of ``seeds``; returns
+    ``{name: entry}`` (see docs/tuning.md).
 
     ``on_method(name, entry)`` is called as each method finishes (to write the record),
     ``on_point()`` after each evaluation (a progress bar).
     """
-    registry = registry or Registry.discover()
-    planned = plan(names, registry, budget)
     context = multiprocessing.get_context("spawn")  # no forked numba or BLAS threads
     results = {}
     with concurrent.futures.ProcessPoolExecutor(max_workers=max(1, jobs), mp_context=context,
@@ -117,7 +115,7 @@ def tune(names, seeds, budget: int, jobs: int = 1, on_method=None, on_point=None
 
 def entry(tunable: dict, tried: list[tuple[dict, list[float], str]], note: str, seconds: float) -> dict:
     """One method's record: every point with its scores, the best, the rule's verdict."""
-    best = best_of([(p, s) for p, s, _ in tried])
+    best = best_of([s for _, s, _ in tried])
     default, chosen = tried[0], tried[best]
     replaced = best != 0 and replaces_default(default[1], chosen[1])
     errors = sorted({e for _, _, e in tried if e})

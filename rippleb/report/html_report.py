@@ -69,8 +69,9 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
         ``{scenario: ScenarioSignals}`` already streamed for ``figure_seed`` (saves
         re-simulating them).
     """
-    from rippleb.report.tables import (condition_headline, condition_summary_markdown, counts_sentence, is_recorded,
-                                title_lines)
+    from rippleb.report.claims import split_sentence
+    from rippleb.report.tables import (condition_headline, condition_summary_markdown, counts_sentence,
+                                       headline_lines, is_recorded, title_lines)
 
     from rippleb.report.recorded import ranking_column
 
@@ -91,14 +92,15 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
     if recorded:
         body += _recorded_body(frame)
     else:
-        body += ["<h2>Method x condition: mean RMS error over the scenarios [Nm]</h2>",
-                 _markdown_table(condition_summary_markdown(frame)),
-                 "<ul>" + "".join(f"<li>{_md(s)}</li>" for s in condition_headline(frame)) + "</ul>"]
+        body += ["<h2>Headlines</h2>", f"<p>{_md(split_sentence(frame['seed'].unique()))}</p>",
+                 _list(headline_lines(frame)),
+                 "<h2>Method x condition: mean RMS error over the scenarios [Nm]</h2>",
+                 _markdown_table(condition_summary_markdown(frame)), "<h3>Who leads under each condition</h3>",
+                 _list(condition_headline(frame))]
     if frame["condition"].nunique() > 1:
         from rippleb.report.verdicts import method_verdicts
 
-        body += ["<h3>Each method in plain words</h3>",
-                 "<ul>" + "".join(f"<li>{_md(v)}</li>" for v in method_verdicts(frame)) + "</ul>"]
+        body += ["<h3>Each method in plain words</h3>", _list(method_verdicts(frame))]
     body += ["<h2>Every row</h2>", '<p class="note">One point per row (device); hover for method, '
              "scenario, condition and seed; drag to zoom, double-click to reset.</p>", divs[0],
              "<h2>Accuracy against per-tick cost</h2>", divs[1]]
@@ -144,7 +146,7 @@ def _recorded_body(frame) -> list[str]:
             body += [_markdown_table(log_markdown(rows)), f'<p class="note">{_md(UNITS_NOTE)}</p>',
                      f"<p>{_md(leader_sentence(rows, column))}</p>"]
     return body + ["<h3>What the truth-free columns cannot tell</h3>",
-                   "<ul>" + "".join(f"<li>{_md(c)}</li>" for c in TRUTH_FREE_CAVEATS) + "</ul>"]
+                   _list(TRUTH_FREE_CAVEATS)]
 
 
 def metric_columns(frame) -> list[str]:
@@ -203,6 +205,11 @@ def _provenance_table(prov: dict) -> str:
     from rippleb.report.provenance import provenance_markdown
 
     return _markdown_table(provenance_markdown(prov))
+
+
+def _list(items) -> str:
+    """Sentences (Markdown back-ticks) as an HTML list."""
+    return "<ul>" + "".join(f"<li>{_md(item)}</li>" for item in items) + "</ul>"
 
 
 def _md(text: str) -> str:

@@ -29,8 +29,10 @@ from rippleb.metrics import METRIC_COLUMNS
 from rippleb.truthfree import TRUTH_FREE_COLUMNS
 from rippleb.engine.results import RunWarning, copy_rows, row_key, swept_columns
 from rippleb.engine.sealing import sealed_text
+from rippleb.report.reading import READING_RECORDED, READING_SIMULATED  # noqa: F401 - re-exported
 from rippleb.report.tuning_table import tuning_markdown
 from rippleb.report.verdicts import method_verdicts
+from rippleb.report.claims import split_sentence
 from rippleb.report.stats import (CONFIDENCE, METHOD_ORDER, fmt_interval, interval_frame,  # noqa: F401
                            method_order, scenario_order, t_interval, with_condition)
 from rippleb.report.table_one import (PAPER_CITATION, PAPER_TABLE_I, TABLE_I_METHODS,  # noqa: F401
@@ -38,7 +40,7 @@ from rippleb.report.table_one import (PAPER_CITATION, PAPER_TABLE_I, TABLE_I_MET
 from rippleb.report.tables import (ACCURACY_COLUMNS, MATRIX_COLUMNS, by_condition,  # noqa: F401
                             counts_sentence, is_recorded, title_lines,
                             condition_headline, condition_summary, condition_summary_markdown,
-                            failed_markdown, headline_sentences, matrix_markdown, plural,
+                            failed_markdown, headline_lines, headline_sentences, matrix_markdown, plural,
                             ranking, ranking_markdown, summary_text, timing_markdown, timing_note)
 
 def load_rows(run_dir):
@@ -98,10 +100,12 @@ def tables_markdown(frame) -> str:
 
         return recorded_tables_markdown(frame)
     source = "Recorded" if is_recorded(frame) else "Simulated"
-    parts = ["## Method x condition (mean `rms_error_nm` over the scenarios, 95 % interval)", "",
-             "Per seed (device), the mean RMS error over the scenarios every method finished under "
-             "that condition; then mean ± 95 % t-interval over seeds.", "",
-             condition_summary_markdown(frame), ""]
+    parts = ["## Headlines", "", split_sentence(frame["seed"].unique()), ""]
+    parts += [f"- {s}" for s in headline_lines(frame)] + [""]
+    parts += ["## Method x condition (mean `rms_error_nm` over the scenarios, 95 % interval)", "",
+              "Per seed (device), the mean RMS error over the scenarios every method finished under "
+              "that condition; then mean ± 95 % t-interval over seeds.", "",
+              condition_summary_markdown(frame), "", "### Who leads under each condition", ""]
     parts += [f"- {s}" for s in condition_headline(frame)] + [""]
     parts += _gear_section(frame)
     verdicts = method_verdicts(frame)
@@ -204,59 +208,6 @@ def _same(a, b, rtol: float | None) -> bool:
 def _plain(value):
     """A numpy scalar as the Python number it holds, so messages show ``0.1``, not ``np.float64(0.1)``."""
     return value.item() if isinstance(value, np.generic) else value
-
-
-# What the tables can and cannot say; no numbers here, so nothing in it can go stale.
-READING_SIMULATED = """## Reading these tables
-
-- Every number comes from the simulator (`docs/physics.md`), not from a real joint. Its
-  ripple has the wave-generator orders 1, 2, 4, 6 and 8 with amplitudes affine in the load
-  and a small load-dependent phase, plus components locked to the output angle and strain
-  hysteresis. Under `same-session` the wave-generator part is exactly what the
-  calibration-map methods (`kalman-ripple`, `angle-adaptive-frozen`) identify on the
-  calibration log of the same device, so their result there is the best case for
-  model-based cancellation. The other conditions show what happens when the device has
-  changed since calibration: a power cycle loses the absolute angle until the first index
-  pulse, ageing drifts the map, re-assembly redraws it (`docs/physics.md`, "Deployment
-  conditions").
-- Under every condition, calibration included, the gear has its transmission error: a
-  position error of the wave-generator angle (twice per turn dominant) that puts **real**
-  torque at orders 1 and 2, the ripple's own, through the joint's dynamics
-  (`docs/physics.md`, "Transmission error"). `torque_ref` does not know it. A method that
-  removes everything at those orders removes it too and is charged for it in
-  `rms_error_nm`; `gear_erased_fraction` and `rms_error_without_gear_nm` say what each
-  method did with it.
-- `realistic` is the same joint as `same-session` with the physics no method models turned on
-  at their documented sizes, in the calibration session too: gauge dynamics that change the
-  ripple with speed, a ripple that saturates with load, changes with the loaded tooth flank
-  and follows the load's history, ripple at orders no method models (3 and the wave
-  generator bearing's 9.24), gauge warm-up within the session, an anti-alias filter and PWM
-  pickup before the ADC, encoder edge errors, eccentricity and missed counts
-  (`docs/physics.md`, "Beyond the methods' models"); its position loop is today's. It is where a method that wins only because the simulator's ripple has
-  the form it assumes would be found out; `results/sweeps/` varies each effect alone.
-- `torque_ref` (Table I's reference) is the paper's eq. (7) on the desired trajectory with
-  a nominal arm model whose masses and inertias differ from the simulated arm's by a few
-  per cent, as an identification leaves them.
-- `order-tracking` switches to the dead zone when no encoder position is crossed within
-  its trigger timeout, chosen on the calibration scenario (`docs/methods/order-tracking.md`).
-- `delay_ms` is the lag that best correlates estimate and truth, `n/a` where the
-  correlation peak is not distinct (slowly varying torque); `step_latency_ms` and
-  `bandwidth_hz` measure latency and bandwidth where the scenario defines them
-  (`docs/metrics.md`).
-- Timing columns depend on the machine and its load; compare methods within one run."""
-
-READING_RECORDED = """## Reading these tables
-
-- Every number comes from the recorded log named in the scenario column (`log:NAME`),
-  scored against its `torque_ref` column where it has one (and `torque_true` where the log
-  has one); one log is one device, so there are no intervals over devices.
-- Every row also has the truth-free scores (`ripple_wg_nm`, `rest_std_nm`,
-  `strain_delay_ms`), computed from the estimate, the strain and the encoder alone; a log
-  without any reference is ranked by them. Each measures one symptom, not the error
-  (below, and `docs/metrics.md`, "Scores without ground truth").
-- The `calibration` column of `results.csv` says what each method was fitted on; `self`
-  means the scored log itself, which is not a fair test of any method.
-- Timing columns depend on the machine and its load; compare methods within one run."""
 
 
 def readme_markdown(frame, prov: dict, figures: dict, *, published: bool = False,

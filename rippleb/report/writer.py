@@ -239,7 +239,7 @@ def readme_markdown(frame, prov: dict, figures: dict, *, published: bool = False
 
 def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, argv=None,
            published: bool = False, html: bool = False, figure_format: str = "png",
-           speed_seeds: int | None = None) -> dict:
+           speed_seeds: int | None = None, salt_file=None) -> dict:
     """Write the report of ``run_dir`` into ``out`` (default ``run_dir/report``).
 
     Parameters
@@ -263,6 +263,10 @@ def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, arg
     speed_seeds
         The error-against-speed figure averages the first ``speed_seeds`` seeds of the run
         (default: all of them; each is re-simulated and re-streamed).
+    salt_file
+        The salt of a sealed run (the file ``rippleb run --sealed`` wrote), to publish beside
+        the report as ``OUT/salt.txt`` once checked against the run's commitment
+        (:mod:`rippleb.report.publication`); ``out`` must then lie outside ``run_dir``.
 
     Returns
     -------
@@ -273,17 +277,24 @@ def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, arg
     run_dir = Path(run_dir)
     frame = load_rows(run_dir)
     out = Path(out) if out is not None else run_dir / "report"
+    salt = None
+    if salt_file is not None:
+        from rippleb.engine.sealing import published_salt
+        from rippleb.report.publication import check_salt_destination
+
+        check_salt_destination(run_dir, out)
+        salt = published_salt(read_run_provenance(run_dir), salt_file)
     _mkdir(out)
     try:
         return _write_report(run_dir, out, frame, figures=figures, figure_seed=figure_seed, argv=argv,
                              published=published, html=html, figure_format=figure_format,
-                             speed_seeds=speed_seeds)
+                             speed_seeds=speed_seeds, salt=salt)
     except OSError as exc:  # a full disk or a quota while writing figures: one line, not a traceback
         raise InputError(f"{exc.filename or out}: cannot write the report: {exc.strerror or exc}") from None
 
 
 def _write_report(run_dir: Path, out: Path, frame, *, figures, figure_seed, argv, published, html,
-                  figure_format, speed_seeds) -> dict:
+                  figure_format, speed_seeds, salt=None) -> dict:
     prov = {"run": read_run_provenance(run_dir), "report": collect_provenance(argv),
             "published": published, "seeds": sorted(int(s) for s in frame["seed"].unique()),
             "seeds_text": seeds_text(frame["seed"].unique()), "rows": len(frame),
@@ -293,6 +304,11 @@ def _write_report(run_dir: Path, out: Path, frame, *, figures, figure_seed, argv
         prov[f"rows_{col}"] = ", ".join(values) or "not recorded"
     prov["run_dir"] = str(run_dir)
     prov["sealed"] = sealed_text(frame, prov["run"])
+    if salt is not None:
+        from rippleb.report.publication import verify_text, write_salt
+
+        prov["salt"] = write_salt(out, salt)
+        prov["sealed"] += " " + verify_text(prov["salt"])
     drawn, warnings, signals = {}, environment_warnings(frame, prov["run"]), {}
     if prov["sealed"].startswith("Partly"):
         warnings.append(prov["sealed"])

@@ -1,0 +1,109 @@
+"""A sealed publication's salt beside its report, and the re-run that verifies its rows.
+
+The published comparison is a sealed run (``rippleb run --sealed FILE``, docs/report.md):
+its devices were drawn from a secret salt that no method and no developer saw. Once the
+results are out, the salt is published with them (``rippleb report --salt-file FILE``
+writes it to ``OUT/salt.txt`` after checking it against the run's commitment), so that
+anyone can re-run any row on the same device and find the same numbers
+(:func:`verify`); each new publication draws a new salt, hence new devices.
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+from pathlib import Path
+
+from rippleb.errors import InputError
+
+#: The salt's file name beside a published report.
+SALT_NAME = "salt.txt"
+#: A row's key in a results file.
+KEY = ("method", "scenario", "condition", "seed")
+
+
+def check_salt_destination(run_dir: Path, out: Path) -> None:
+    """Refuse to write a salt into the run directory: a later ``--resume`` of that run
+    would let its methods read it there."""
+    run_dir, out = Path(run_dir).resolve(), Path(out).resolve()
+    if out == run_dir or run_dir in out.parents:
+        raise InputError(f"--salt-file: the report would put the salt inside the run directory {run_dir}, "
+                         f"where the methods of a later --resume could read it; give --out outside it")
+
+
+def write_salt(out: Path, salt: bytes) -> str:
+    """Write ``salt`` as ``OUT/salt.txt`` (64 hex digits) and return its name."""
+    from rippleb.files import atomic_path
+
+    with atomic_path(Path(out) / SALT_NAME) as tmp:
+        tmp.write_text(salt.hex() + "\n", encoding="ascii")
+    return SALT_NAME
+
+
+def verify_text(salt_name: str) -> str:
+    """The README's sentence on how to check any published row, with the salt beside it."""
+    return (f"The salt is published beside this report (`{salt_name}`; its SHA-256 is the commitment "
+            f"above): re-run any row on the same device with `rippleb run --salt-file {salt_name} "
+            f"--methods M --scenarios S --conditions C --seed-start K --seeds 1 --out v` and compare "
+            f"it with its row here, which `rippleb.report.publication.verify` does (docs/report.md, "
+            f"\"Verifying the publication\").")
+
+
+def published_salt_file(results_dir) -> Path:
+    """The salt file of the publication in ``results_dir``, checked against the commitment
+    its ``provenance.json`` records; one line naming what is missing otherwise."""
+    from rippleb.engine.sealing import commitment, read_salt
+
+    results_dir = Path(results_dir)
+    path, prov_path = results_dir / SALT_NAME, results_dir / "provenance.json"
+    try:
+        run = json.loads(prov_path.read_text()).get("run", {})
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{prov_path}: cannot read the publication's provenance: {exc}") from None
+    recorded = (run.get("sealed") or {}).get("commitment")
+    if not recorded:
+        raise InputError(f"{prov_path}: not a sealed publication (no commitment recorded)")
+    if not path.is_file():
+        raise InputError(f"{path}: the publication's salt is missing (rippleb report --salt-file writes it)")
+    if commitment(read_salt(path)) != recorded:
+        raise InputError(f"{path}: not the salt of this publication (its SHA-256 differs from {recorded[:19]}...)")
+    return path
+
+
+def verify(results_dir, keys, *, jobs: int = 1, columns=None, rtol: dict | None = None) -> list[str]:
+    """Re-run rows of the sealed publication in ``results_dir`` on their devices (its
+    published salt) and compare them with the published rows.
+
+    Parameters
+    ----------
+    results_dir
+        A published report directory: ``results.csv``, ``provenance.json``, ``salt.txt``.
+    keys
+        ``(method, scenario, condition, seed)`` of each row to re-run.
+    jobs
+        Rows run at once.
+    columns, rtol
+        As in :func:`rippleb.report.writer.compare_rows` (default: every accuracy column,
+        exactly).
+
+    Returns
+    -------
+    list of str
+        One line per differing value or missing row; empty when every row re-ran the same.
+    """
+    import pandas as pd
+
+    from rippleb.engine.runner import run
+    from rippleb.report.tables import ACCURACY_COLUMNS
+    from rippleb.report.writer import compare_rows, read_results_exact
+
+    salt = published_salt_file(results_dir)
+    published = read_results_exact(Path(results_dir) / "results.csv")
+    fresh = []
+    with tempfile.TemporaryDirectory(prefix="rippleb-verify-") as tmp:
+        for i, (method, scenario, condition, seed) in enumerate(keys):
+            out = Path(tmp) / f"row{i}"
+            run([method], [scenario], [int(seed)], conditions=[condition], jobs=jobs, out=out, salt_file=salt)
+            fresh.append(read_results_exact(out / "results.csv"))   # as the published rows were read
+    return compare_rows(published, pd.concat(fresh, ignore_index=True),
+                        columns=ACCURACY_COLUMNS if columns is None else columns, rtol=rtol)

@@ -7,7 +7,8 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from rippleb.report.claims import DISCOVERY, REPLICATION, claim_family, half, headlines
-from rippleb.report.paired import ALPHA, holm, paired_test, paired_tests
+from rippleb.report.paired import ALPHA, paired_test, paired_tests
+from rippleb.signed_rank import holm
 from rippleb.report.stats import t_interval
 
 

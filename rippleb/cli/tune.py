@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 from rippleb.errors import InputError
-from rippleb.tuning import BUDGET, CRITERION, RULE, SEED, SEEDS
+from rippleb.tuning import BUDGET, CRITERION, RULE, RULE_ID, SEED, SEEDS
 
 
 def add_tune(sub) -> None:
@@ -37,6 +37,10 @@ def add_tune(sub) -> None:
                    help=f"points evaluated in parallel processes (default: the number of CPUs, {os.cpu_count()} here)")
     p.add_argument("--out", type=Path, help="JSON file for the record (written after each method)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--compare", nargs=2, type=Path, metavar=("A.json", "B.json"),
+                   help="tune nothing: print the stability table of two records made on disjoint sets of "
+                        "tuning devices (the point each adopts, and what each choice costs on the other "
+                        "set's devices; docs/tuning.md)")
     p.set_defaults(func=cmd_tune)
 
 
@@ -48,6 +52,8 @@ def cmd_tune(args) -> int:
     from rippleb.registry import Registry
     from rippleb.version import __version__
 
+    if args.compare is not None:
+        return compare(args)
     seeds = parse_seeds(args.seeds)
     if args.budget < 1:
         raise InputError(f"--budget must be at least 1, got {args.budget}")
@@ -61,6 +67,7 @@ def cmd_tune(args) -> int:
     planned = plan(names, registry, args.budget)
     total = sum(len(points) for _, points, _ in planned.values())
     record = {"protocol": {"budget": args.budget, "seeds": seeds, "criterion": CRITERION, "rule": RULE,
+                           "rule_id": RULE_ID,
                            "sampler": f"the default, then budget-1 points of a scrambled Sobol sequence "
                                       f"(scipy.stats.qmc, seed {SEED}), 3 significant digits"},
               "rippleb_version": __version__, "methods": {}}
@@ -79,13 +86,29 @@ def cmd_tune(args) -> int:
     return 0
 
 
+def compare(args) -> int:
+    """``rippleb tune --compare A.json B.json``: the stability table, on standard output."""
+    from rippleb.report.tuning_stability import read, stability_markdown
+
+    given = [flag for flag, value in (("--methods", args.methods), ("--out", args.out)) if value is not None]
+    if given:
+        raise InputError(f"{given[0]} does not apply with --compare (it reads two records and tunes nothing)")
+    print(stability_markdown(*(read(path) for path in args.compare)))
+    return 0
+
+
 def line(name: str, entry: dict) -> str:
     """One method's result as one line."""
     if entry["evaluations"] == 1:
         return f"{name}: {entry['default_score']:.3f} Nm at its defaults; {entry['note']}"
-    verdict = ("replaces the default" if entry["replaced"]
-               else "default kept" + (" (the best point is not better on every device)"
-                                      if entry["best"] != entry["default"] else ""))
+    adopted = ", ".join(f"{k}={v:g}" for k, v in entry["adopted"].items())
+    if not entry["replaced"]:
+        verdict = "default kept" + (" (no point beats it by the paired test)" if entry["best"] != entry["default"]
+                                    else " (the best point is the default)")
+    elif entry["adopted"] == entry["best"]:
+        verdict = "the best point replaces the default"
+    else:
+        verdict = f"{adopted} replaces the default (the best point does not pass the paired test)"
     best = ", ".join(f"{k}={v:g}" for k, v in entry["best"].items())
     text = (f"{name}: default {entry['default_score']:.3f} Nm, best {entry['best_score']:.3f} Nm at "
             f"{best} ({entry['evaluations']} evaluations): {verdict}")

@@ -20,7 +20,7 @@ from rippleb.metrics import Truth, score
 from rippleb.registry import Registry
 from rippleb.simulator import simulate
 from rippleb.streaming import run_method
-from rippleb.tuning import best_of, candidates, check_tunable, replaces_default
+from rippleb.tuning import adopted, best_of, candidates, check_tunable, pvalues
 
 #: What a method without a ``tunable`` attribute is recorded with.
 UNDECLARED = "declares no tunable ranges (scored at its defaults only)"
@@ -115,13 +115,15 @@ def tune(planned: dict, seeds, jobs: int = 1, on_method=None, on_point=None) -> 
 
 def entry(tunable: dict, tried: list[tuple[dict, list[float], str]], note: str, seconds: float) -> dict:
     """One method's record: every point with its scores, the best, the rule's verdict."""
-    best = best_of([s for _, s, _ in tried])
+    scores = [s for _, s, _ in tried]
+    best, kept = best_of(scores), adopted(scores)
     default, chosen = tried[0], tried[best]
-    replaced = best != 0 and replaces_default(default[1], chosen[1])
+    replaced = kept != 0
     errors = sorted({e for _, _, e in tried if e})
     return {"tunable": {k: list(v) for k, v in tunable.items()}, "note": note,
             "default": default[0], "default_scores": default[1], "default_score": float(np.mean(default[1])),
             "best": chosen[0], "best_scores": chosen[1], "best_score": float(np.mean(chosen[1])),
-            "replaced": replaced, "adopted": chosen[0] if replaced else default[0],
+            "replaced": replaced, "adopted": tried[kept][0], "adopted_scores": tried[kept][1],
             "evaluations": len(tried), "seconds": round(seconds, 1), "errors": errors,
-            "points": [{"params": p, "scores": s} for p, s, _ in tried]}
+            "points": [{"params": p, "scores": s, "p_holm": q if np.isfinite(q) else None}
+                       for (p, s, _), q in zip(tried, pvalues(scores))]}

@@ -53,7 +53,8 @@ x.textContent.localeCompare(y.textContent):(u-v);return asc?r:-r;});
 rows.forEach(function(r){tb.appendChild(r);});});});"""
 
 
-def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals: dict | None = None) -> Path:
+def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals: dict | None = None,
+               sweeps=()) -> Path:
     """Write the interactive report of ``frame`` to ``path`` and return it.
 
     Parameters
@@ -68,6 +69,9 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
     signals
         ``{scenario: ScenarioSignals}`` already streamed for ``figure_seed`` (saves
         re-simulating them).
+    sweeps
+        ``[(name, rows)]`` of the sweeps the conclusions are re-evaluated on
+        (:mod:`rippleb.report.holds`).
     """
     from rippleb.report.claims import split_sentence
     from rippleb.report.tables import (condition_headline, condition_summary_markdown, counts_sentence,
@@ -111,6 +115,10 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
         body += [f"<h2>All metrics under <code>{html.escape(condition)}</code></h2>",
                  '<p class="note">Mean ± 95 % t-interval over seeds; click a header to sort.</p>',
                  _metrics_table(frame[frame["condition"] == condition])]
+    if sweeps and not recorded:
+        from rippleb.report.holds import holds_blocks
+
+        body += [_block(kind, content) for kind, content in holds_blocks(frame, sweeps)]
     if not recorded:
         from rippleb.report.tuning_table import tuning_parts
 
@@ -205,6 +213,15 @@ def _provenance_table(prov: dict) -> str:
     from rippleb.report.provenance import provenance_markdown
 
     return _markdown_table(provenance_markdown(prov))
+
+
+def _block(kind: str, content) -> str:
+    """One block of :func:`rippleb.report.holds.holds_blocks` as HTML."""
+    if kind in ("h2", "h3", "h4"):
+        return f"<{kind}>{_md(content)}</{kind}>"
+    if kind == "ul":
+        return _list(content)
+    return _markdown_table(content) if kind == "table" else f"<p>{_md(content)}</p>"
 
 
 def _list(items) -> str:

@@ -9,9 +9,9 @@ typical one), and a t-interval over a few tens of them then claims more than a s
 of devices supports. So the verdict of a comparison follows a distribution-free test, the
 **Wilcoxon signed-rank test** of the per-device differences (``scipy.stats.wilcoxon``: its
 exact null distribution for up to 50 devices without ties, else scipy's permutation or
-normal approximation). A report makes several claims at once (one per condition, one per
-scenario of a ranking); the p-values of one family are corrected by **Holm's** step-down
-method, so that all of its claims hold together at the 5 % level. Beside the test, the
+normal approximation; :mod:`rippleb.signed_rank`, which the tuning rule uses too). A report
+makes several claims at once (one per condition, one per scenario of a ranking); the
+p-values of one family are corrected by **Holm's** step-down method, so that all of its claims hold together at the 5 % level. Beside the test, the
 mean difference and its t-interval describe the size of the lead; that interval is widened
 to the Bonferroni level ``1 - 0.05 / k`` for the ``k`` claims of its family (Holm has no
 interval of its own), and no verdict is read from it.
@@ -35,10 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rippleb.report.stats import CONFIDENCE, fmt_interval, t_interval
-
-#: The family-wise error level of a report's claims.
-ALPHA = 1.0 - CONFIDENCE
+from rippleb.report.stats import fmt_interval, t_interval
+from rippleb.signed_rank import ALPHA, holm, signed_rank
 #: The correction for the number of claims of a family, as the report names it.
 CORRECTION = "Holm"
 TEST = "Wilcoxon signed-rank"
@@ -122,7 +120,7 @@ def paired_tests(pairs, alternative: str = "two-sided") -> list[PairedTest]:
     diffs = [_differences(first, second) for first, second in pairs]
     claims = max(1, len(diffs))
     confidence = 1.0 - ALPHA / claims
-    raw = [_wilcoxon(d, alternative) for d in diffs]
+    raw = [signed_rank(d, alternative) for d in diffs]
     adjusted = holm([p for p, _ in raw])
     out = []
     for d, (_, toward), p in zip(diffs, raw, adjusted):
@@ -138,44 +136,10 @@ def paired_test(first, second, alternative: str = "two-sided") -> PairedTest:
     return paired_tests([(first, second)], alternative)[0]
 
 
-def holm(pvalues) -> list[float]:
-    """Holm's step-down adjustment: the ``i``-th smallest of ``k`` p-values times
-    ``k - i`` (``i`` from 0), made non-decreasing and capped at 1; NaN stays NaN and does
-    not count towards ``k``.
-
-    >>> holm([0.01, 0.04, 0.03])
-    [0.03, 0.06, 0.06]
-    """
-    p = np.asarray(pvalues, float)
-    out = np.full(len(p), np.nan)
-    valid = np.flatnonzero(np.isfinite(p))
-    order = valid[np.argsort(p[valid], kind="stable")]
-    k, running = len(order), 0.0
-    for i, j in enumerate(order):
-        running = max(running, min(1.0, (k - i) * p[j]))
-        out[j] = running
-    return [float(v) for v in out]
-
-
 def _differences(first, second) -> np.ndarray:
     both = first.to_frame("a").join(second.to_frame("b"), how="inner").dropna()
     both = both[np.isfinite(both["a"]) & np.isfinite(both["b"])]
     return (both["b"] - both["a"]).to_numpy(float)
-
-
-def _wilcoxon(d: np.ndarray, alternative: str) -> tuple[float, bool]:
-    """The signed-rank p-value of ``d`` (positive: ``first`` lower) and whether its ranks
-    lean toward ``first``."""
-    nonzero = d[d != 0]
-    if len(d) < 2:
-        return float("nan"), False
-    if len(nonzero) == 0:     # identical on every device: nothing to rank
-        return 1.0, False
-    from scipy.stats import rankdata, wilcoxon
-
-    ranks = rankdata(np.abs(nonzero))
-    toward = bool(ranks[nonzero > 0].sum() > ranks[nonzero < 0].sum())
-    return float(wilcoxon(d, alternative=alternative).pvalue), toward
 
 
 def _p_text(p: float) -> str:

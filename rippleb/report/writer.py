@@ -156,6 +156,25 @@ def _condition_section(condition: str, rows, source: str) -> list[str]:
     return parts
 
 
+def load_sweep(path):
+    """The rows of a sweep for "Where each conclusion holds" (``--sweep``): a run directory
+    of ``rippleb sweep`` or a report written from one; one line when it holds no swept column."""
+    rows = load_rows(path)
+    if not swept_columns(rows.columns):
+        raise InputError(f"--sweep {path}: no swept parameter in its rows (a 'rippleb sweep' run, or its report, "
+                         f"is what --sweep reads)")
+    return rows
+
+
+def holds_markdown(frame, sweeps) -> str:
+    """The section "Where each conclusion holds" of ``frame``'s report over ``sweeps``
+    (``[(name, rows)]``), as the README prints it: a pure function of the rows, so
+    ``tests/test_published.py`` regenerates it."""
+    from rippleb.report.holds import blocks_markdown, holds_blocks
+
+    return blocks_markdown(holds_blocks(frame, sweeps))
+
+
 def read_results_exact(path):
     """A results CSV with every float parsed back to the exact double that was written.
 
@@ -211,7 +230,7 @@ def _plain(value):
 
 
 def readme_markdown(frame, prov: dict, figures: dict, *, published: bool = False,
-                    run_dir: str = "DIR") -> str:
+                    run_dir: str = "DIR", sweeps=()) -> str:
     """``README.md`` of a report: every number from ``frame`` or ``prov``.
 
     ``published`` is True only for the comparison in the repository's ``results/``
@@ -224,6 +243,8 @@ def readme_markdown(frame, prov: dict, figures: dict, *, published: bool = False
         parts += ["", prov.get("sealed") or sealed_text(frame, prov.get("run", {}))]
     parts += ["", READING_RECORDED if recorded else READING_SIMULATED]
     parts += ["", tables_markdown(frame)]
+    if sweeps and not recorded:
+        parts += ["", holds_markdown(frame, sweeps)]
     if not recorded:
         parts += ["", "## How each method was tuned", "",
                   tuning_markdown(prov.get("run", {}).get("tuning"), method_order(frame["method"]))]
@@ -239,7 +260,7 @@ def readme_markdown(frame, prov: dict, figures: dict, *, published: bool = False
 
 def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, argv=None,
            published: bool = False, html: bool = False, figure_format: str = "png",
-           speed_seeds: int | None = None, salt_file=None) -> dict:
+           speed_seeds: int | None = None, salt_file=None, sweeps=()) -> dict:
     """Write the report of ``run_dir`` into ``out`` (default ``run_dir/report``).
 
     Parameters
@@ -267,6 +288,10 @@ def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, arg
         The salt of a sealed run (the file ``rippleb run --sealed`` wrote), to publish beside
         the report as ``OUT/salt.txt`` once checked against the run's commitment
         (:mod:`rippleb.report.publication`); ``out`` must then lie outside ``run_dir``.
+    sweeps
+        Directories of sweep rows (``rippleb sweep`` runs, or the reports written from
+        them) on which the report's conclusions are re-evaluated: the section "Where each
+        conclusion holds" (:mod:`rippleb.report.holds`).
 
     Returns
     -------
@@ -284,17 +309,18 @@ def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, arg
 
         check_salt_destination(run_dir, out)
         salt = published_salt(read_run_provenance(run_dir), salt_file)
+    swept = [(str(path), load_sweep(path)) for path in sweeps]
     _mkdir(out)
     try:
         return _write_report(run_dir, out, frame, figures=figures, figure_seed=figure_seed, argv=argv,
                              published=published, html=html, figure_format=figure_format,
-                             speed_seeds=speed_seeds, salt=salt)
+                             speed_seeds=speed_seeds, salt=salt, sweeps=swept)
     except OSError as exc:  # a full disk or a quota while writing figures: one line, not a traceback
         raise InputError(f"{exc.filename or out}: cannot write the report: {exc.strerror or exc}") from None
 
 
 def _write_report(run_dir: Path, out: Path, frame, *, figures, figure_seed, argv, published, html,
-                  figure_format, speed_seeds, salt=None) -> dict:
+                  figure_format, speed_seeds, salt=None, sweeps=()) -> dict:
     prov = {"run": read_run_provenance(run_dir), "report": collect_provenance(argv),
             "published": published, "seeds": sorted(int(s) for s in frame["seed"].unique()),
             "seeds_text": seeds_text(frame["seed"].unique()), "rows": len(frame),
@@ -303,6 +329,7 @@ def _write_report(run_dir: Path, out: Path, frame, *, figures, figure_seed, argv
         values = sorted(str(v) for v in frame[col].dropna().unique()) if col in frame else []
         prov[f"rows_{col}"] = ", ".join(values) or "not recorded"
     prov["run_dir"] = str(run_dir)
+    prov["sweeps"] = [{"dir": name, "rows": len(rows)} for name, rows in sweeps]
     prov["sealed"] = sealed_text(frame, prov["run"])
     if salt is not None:
         from rippleb.report.publication import verify_text, write_salt
@@ -333,13 +360,14 @@ def _write_report(run_dir: Path, out: Path, frame, *, figures, figure_seed, argv
     with atomic_path(out / "results.csv") as tmp:
         copy_rows(run_dir / "results.csv", tmp, {row_key(r) for r in frame.to_dict("records")})
     _write(out / "provenance.json", json.dumps(prov, indent=1, default=str) + "\n")
-    _write(out / "README.md", readme_markdown(frame, prov, drawn, published=published, run_dir=str(run_dir)))
+    _write(out / "README.md", readme_markdown(frame, prov, drawn, published=published, run_dir=str(run_dir),
+                                              sweeps=sweeps))
     page = None
     if html:
         from rippleb.report.html_report import write_html
 
         page = write_html(frame, prov, out / "index.html", figure_seed=figure_seed if figures else None,
-                          signals=signals)
+                          signals=signals, sweeps=sweeps)
     return {"readme": out / "README.md", "csv": out / "results.csv", "provenance": out / "provenance.json",
             "html": page, "figures": {k: v[0] for k, v in drawn.items()}, "warnings": warnings}
 

@@ -141,3 +141,17 @@ def test_published_readme_tables_are_generated_from_the_published_rows():
     readme = (RESULTS / "README.md").read_text()
     assert report.tables_markdown(published) in readme, \
         "results/README.md does not hold the tables of results/results.csv: edited by hand, or stale"
+
+
+def test_the_published_readme_says_where_each_conclusion_holds():
+    """The section "Where each conclusion holds" is regenerated from the sweeps the report
+    read (recorded in results/provenance.json, published under results/sweeps/) and found
+    verbatim in results/README.md."""
+    published = _published()
+    sweeps = json.loads((RESULTS / "provenance.json").read_text()).get("sweeps") or []
+    assert sweeps, ("results/ was reported without sweeps: publish with 'rippleb report ... --sweep "
+                    "results/sweeps/NAME' (docs/report.md)")
+    root = RESULTS.parent
+    frames = [(entry["dir"], report.load_sweep(root / entry["dir"])) for entry in sweeps]
+    assert report.holds_markdown(published, frames) in (RESULTS / "README.md").read_text(), \
+        "results/README.md's 'Where each conclusion holds' is not what its sweeps give: stale or edited"

@@ -45,7 +45,7 @@ SMALLEST_NORMAL = float(np.finfo(float).tiny)
 #: A torque above this many times the joint's rated torque would break the drive: Harmonic
 #: Drive catalogues rate the momentary peak of size-25 units at 4-7 times the rated torque.
 #: Simulated loads stay below it; a recorded log's estimate beyond it is not scored
-#: (:mod:`rippleb.scorable`).
+#: (:mod:`rippleb.scoring.scorable`).
 MAX_TORQUE_FACTOR = 10.0
 
 

@@ -1,6 +1,6 @@
 """Which rows of a run directory rippleb itself wrote: a keyed hash (HMAC-SHA256) of each.
 
-A method's process is confined (:mod:`rippleb.engine.isolation`): it cannot write the run
+A method's process is confined (:mod:`rippleb.engine.process.isolation`): it cannot write the run
 directory. What it cannot be kept from where the kernel refuses namespaces, and what
 anyone else may do to a results file between runs (an edit by hand, a script, a copied
 row), is caught here: every row rippleb records gets a MAC under a key that only the

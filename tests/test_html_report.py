@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 from rippleb.report import html_report
-from rippleb.metrics import METRIC_COLUMNS
+from rippleb.scoring.metrics import METRIC_COLUMNS
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",

@@ -123,7 +123,7 @@ def test_scores_that_overflow_are_invalid_not_ok(tmp_path, monkeypatch, capsys):
     frame = _frame()
     frame.assign(strain=frame.strain * 1e306).to_csv(tmp_path / "rec.csv", index=False)
     _frame(int(1.2 * FS)).to_csv(tmp_path / "cal.csv", index=False)
-    # a rated torque so large that the scale rule (rippleb.scorable) lets every estimate through
+    # a rated torque so large that the scale rule (rippleb.scoring.scorable) lets every estimate through
     (tmp_path / "rec.toml").write_text("[joint]\nrated_torque = 1e308\n")
     code, err = _run(tmp_path, monkeypatch, capsys, "--log", "rec.csv", "--calibration", "cal.csv")
     assert code == 0, err

@@ -29,10 +29,10 @@ from rippleb.simulator.conditions import DEFAULT_CONDITION
 from rippleb import integrity
 from rippleb.errors import InputError, RunWarning  # noqa: F401 - RunWarning: re-exported
 from rippleb.files import atomic_path, open_appending
-from rippleb.metrics import METRIC_COLUMNS
+from rippleb.scoring.metrics import METRIC_COLUMNS
 from rippleb.printable import escaped
-from rippleb.scorable import MEASURED, NO_REFERENCE  # noqa: F401 - MEASURED re-exported
-from rippleb.truthfree import TRUTH_FREE_COLUMNS
+from rippleb.scoring.scorable import MEASURED, NO_REFERENCE  # noqa: F401 - MEASURED re-exported
+from rippleb.scoring.truthfree import TRUTH_FREE_COLUMNS
 
 KEY_COLUMNS = ("method", "scenario", "condition", "seed")
 # The truth-free columns came later: a results file without them still reads (as n/a).

@@ -18,7 +18,7 @@ Where the salt lives (docs/robustness.md, "Sealed runs"):
   through the fork server (whose freed memory every later row would inherit); they run
   rippleb's code only, and the visible logs they write name the public seed;
 * while it is in memory the runner is not dumpable (``PR_SET_DUMPABLE``, for the whole
-  of every run: :func:`rippleb.engine.isolation.undumpable`), so where the kernel refuses PID
+  of every run: :func:`rippleb.engine.process.isolation.undumpable`), so where the kernel refuses PID
   namespaces a row of the same user cannot read it (or the truths) through
   ``/proc/<runner>/mem`` either;
 * ``run.json`` records only its commitment (``sha256:`` + SHA-256 of the 32 salt bytes);
@@ -68,7 +68,7 @@ class Seal:
         self.commitment = commitment(salt)
 
     def files(self) -> tuple[Path, ...]:
-        """The salt's files, which a method's worker sees covered (:mod:`rippleb.engine.isolation`)."""
+        """The salt's files, which a method's worker sees covered (:mod:`rippleb.engine.process.isolation`)."""
         return tuple(path for path in (self.save_to, self.read_from) if path is not None)
 
     def device_seed(self, seed: int) -> int:

@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from rippleb.report.error_figures import (COST_FIGURE_LABELS, error_by_speed,  # noqa: F401
-                                   error_by_speed_over_seeds, longest_rest_restart, plot_accuracy_vs_cost,
-                                   plot_error_vs_speed, plot_residual_spectra, plot_restart_zoom,
-                                   residual_spectra, speed_edges)
+                                          error_by_speed_over_seeds, longest_rest_restart, plot_accuracy_vs_cost,
+                                          plot_error_vs_speed, plot_residual_spectra, plot_restart_zoom,
+                                          residual_spectra, speed_edges)
 from rippleb.report.plotting import (METHOD_STYLE, MOTION_EDGE_LABEL, SIGNAL_SCENARIOS, ScenarioSignals,  # noqa: F401
-                              _amplitude, _motion_edges, _pyplot, _save, fit_methods, stream_methods, style)
+                                     _amplitude, _motion_edges, _pyplot, _save, fit_methods, stream_methods, style)
 
 #: Wave-generator speeds of the Fig. 2 replica [rev/s]: slow to brisk motor speeds.
 DEFAULT_SPEEDS = (1.0, 2.0, 4.0, 6.0, 8.0)
@@ -336,7 +336,7 @@ def _signals_of_seed(methods, scenarios, seed: int) -> tuple[dict, list]:
 def _check_against_rows(sig: ScenarioSignals, ok, scenario: str, seed: int) -> list[str]:
     """A figure's signal must be the one its row scored; a method whose ``reset`` leaks
     state between runs (or a stale table) shows up here as a mismatch."""
-    from rippleb.metrics import rms_error
+    from rippleb.scoring.metrics import rms_error
 
     out = []
     mask = np.asarray(sig.sim.eval_mask, bool)

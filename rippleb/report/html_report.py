@@ -19,7 +19,7 @@ import numpy as np
 
 from rippleb.files import atomic_path
 from rippleb.report.stats import (condition_order, fmt_interval, interval_frame, method_order, scenario_order,
-                           with_condition)
+                                  with_condition)
 
 #: Colour per built-in method, the same as the matplotlib figures (tableau palette).
 COLORS = {"raw": "#1f77b4", "lowpass": "#17becf", "current-based": "#bf00bf", "order-tracking": "#d62728",
@@ -159,8 +159,8 @@ def _recorded_body(frame) -> list[str]:
 
 def metric_columns(frame) -> list[str]:
     """Every numeric metric column of the rows that has a value, the truth-free ones included."""
-    from rippleb.metrics import METRIC_COLUMNS
-    from rippleb.truthfree import TRUTH_FREE_COLUMNS
+    from rippleb.scoring.metrics import METRIC_COLUMNS
+    from rippleb.scoring.truthfree import TRUTH_FREE_COLUMNS
 
     return [c for c in METRIC_COLUMNS + TRUTH_FREE_COLUMNS if c in frame and frame[c].notna().any()]
 

@@ -52,18 +52,18 @@ def fit_methods(methods, seed: int) -> tuple[dict, dict]:
     Returns ``(fitted, errors)``: method name to fitted instance, and to a one-line error.
     A name may be a variant's label (``order-tracking[q=20]``): built with its parameters.
     """
+    from rippleb import harness
     from rippleb.registry import Registry, one_line
     from rippleb.simulator import simulate
     from rippleb.variants import parse_label
 
     registry = Registry.discover()
-    calibration = simulate("calibration", seed).log.for_method(keep_ref=True)
+    calibration = simulate("calibration", seed).log
     fitted, errors = {}, {}
     for name in methods:
         try:
             variant = parse_label(name)
-            method = registry.get(variant.name).load()(**variant.params)
-            method.fit(calibration)
+            method = harness.fit(registry.get(variant.name).load()(**variant.params), calibration)
         except Exception as exc:  # a failing method costs its curves, not the report
             errors[name] = one_line(exc)
         else:
@@ -75,19 +75,17 @@ def stream_methods(fitted: dict, scenario: str, seed: int) -> ScenarioSignals:
     """Simulate ``scenario`` on ``seed`` and stream it through each fitted method.
 
     Each method is ``reset`` before its run (the Method contract), then fed blocks exactly
-    as the runner does (:func:`rippleb.streaming.prepare_blocks`, :func:`~rippleb.streaming.stream`).
+    as the runner does (:func:`rippleb.harness.run`).
     """
+    from rippleb import harness
     from rippleb.registry import one_line
     from rippleb.simulator import simulate
-    from rippleb.streaming import prepare_blocks, stream
 
     sim = simulate(scenario, seed)
-    visible = sim.log.for_method(keep_ref=False)
     estimates, errors = {}, {}
     for name, method in fitted.items():
         try:
-            method.reset(visible.spec)
-            estimates[name], _ = stream(method.step, prepare_blocks(visible), len(visible))
+            estimates[name], _ = harness.run(method, sim.log)
         except Exception as exc:
             errors[name] = one_line(exc)
     return ScenarioSignals(sim, estimates, errors)

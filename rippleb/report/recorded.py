@@ -3,7 +3,7 @@
 A recording has no ``torque_true`` and often no ``torque_ref``. Its rows are ranked by the
 best score they hold (:func:`ranking_column`): the error against ``torque_true`` if any row
 has one, else against ``torque_ref``, else the truth-free :data:`TRUTH_FREE_RANKING`
-(``rippleb/truthfree.py``); every truth-free column is shown beside it with its own rank.
+(``rippleb/scoring/truthfree.py``); every truth-free column is shown beside it with its own rank.
 One log is one device: no intervals. Every number comes from the rows.
 """
 
@@ -13,7 +13,7 @@ import numpy as np
 
 from rippleb.report.markdown import first_line, markdown, one_line, plural
 from rippleb.report.stats import measured_rows, method_order, scenario_order
-from rippleb.scorable import MEASURED
+from rippleb.scoring.scorable import MEASURED
 from rippleb.report.tables import failed_markdown, is_recorded, summary_text, timing_cells
 
 #: The truth-free column a log without any reference is ranked by: the one whose ranking

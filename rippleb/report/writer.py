@@ -23,10 +23,10 @@ import numpy as np
 from rippleb.errors import InputError
 from rippleb.files import atomic_path
 from rippleb.report.provenance import (collect_provenance, environment_sentence, environment_warnings, git_state,
-                                provenance_markdown,  # noqa: F401
-                                read_run_provenance, seeds_text)
-from rippleb.metrics import METRIC_COLUMNS
-from rippleb.truthfree import TRUTH_FREE_COLUMNS
+                                       provenance_markdown,  # noqa: F401
+                                       read_run_provenance, seeds_text)
+from rippleb.scoring.metrics import METRIC_COLUMNS
+from rippleb.scoring.truthfree import TRUTH_FREE_COLUMNS
 from rippleb.engine.results import RunWarning, copy_rows, row_key, swept_columns
 from rippleb.engine.sealing import sealed_text
 from rippleb.report.reading import READING_RECORDED, READING_SIMULATED  # noqa: F401 - re-exported
@@ -34,14 +34,14 @@ from rippleb.report.tuning_table import tuning_markdown
 from rippleb.report.verdicts import method_verdicts
 from rippleb.report.claims import split_sentence
 from rippleb.report.stats import (CONFIDENCE, METHOD_ORDER, fmt_interval, interval_frame,  # noqa: F401
-                           method_order, scenario_order, t_interval, with_condition)
+                                  method_order, scenario_order, t_interval, with_condition)
 from rippleb.report.table_one import (PAPER_CITATION, PAPER_TABLE_I, TABLE_I_METHODS,  # noqa: F401
-                               TABLE_I_SCENARIO, table_one, table_one_markdown)
+                                      TABLE_I_SCENARIO, table_one, table_one_markdown)
 from rippleb.report.tables import (ACCURACY_COLUMNS, MATRIX_COLUMNS, by_condition,  # noqa: F401
-                            counts_sentence, is_recorded, title_lines,
-                            condition_headline, condition_summary, condition_summary_markdown,
-                            failed_markdown, headline_lines, headline_sentences, matrix_markdown, plural,
-                            ranking, ranking_markdown, summary_text, timing_markdown, timing_note)
+                                   counts_sentence, is_recorded, title_lines,
+                                   condition_headline, condition_summary, condition_summary_markdown,
+                                   failed_markdown, headline_lines, headline_sentences, matrix_markdown, plural,
+                                   ranking, ranking_markdown, summary_text, timing_markdown, timing_note)
 
 def load_rows(run_dir):
     """The rows of ``run_dir/results.csv`` as a DataFrame; one-line error if there are none."""

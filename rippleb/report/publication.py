@@ -5,7 +5,8 @@ its devices were drawn from a secret salt that no method and no developer saw. O
 results are out, the salt is published with them (``rippleb report --salt-file FILE``
 writes it to ``OUT/salt.txt`` after checking it against the run's commitment), so that
 anyone can re-run any row on the same device and find the same numbers
-(:func:`verify`); each new publication draws a new salt, hence new devices.
+(:func:`verify`, which compares rows with :func:`compare_rows`); each new publication draws
+a new salt, hence new devices.
 """
 
 from __future__ import annotations
@@ -14,7 +15,11 @@ import json
 import tempfile
 from pathlib import Path
 
+import numpy as np
+
 from rippleb.errors import InputError
+from rippleb.report.stats import with_condition
+from rippleb.report.tables import ACCURACY_COLUMNS
 
 #: The salt's file name beside a published report.
 SALT_NAME = "salt.txt"
@@ -94,8 +99,6 @@ def verify(results_dir, keys, *, jobs: int = 1, columns=None, rtol: dict | None 
     import pandas as pd
 
     from rippleb.engine.runner import run
-    from rippleb.report.tables import ACCURACY_COLUMNS
-    from rippleb.report.writer import compare_rows, read_results_exact
 
     salt = published_salt_file(results_dir)
     published = read_results_exact(Path(results_dir) / "results.csv")
@@ -107,3 +110,57 @@ def verify(results_dir, keys, *, jobs: int = 1, columns=None, rtol: dict | None 
             fresh.append(read_results_exact(out / "results.csv"))   # as the published rows were read
     return compare_rows(published, pd.concat(fresh, ignore_index=True),
                         columns=ACCURACY_COLUMNS if columns is None else columns, rtol=rtol)
+
+
+def read_results_exact(path):
+    """A results CSV with every float parsed back to the exact double that was written.
+
+    pandas >= 3 parses with round-trip precision by default (and deprecates the option);
+    older pandas needs ``float_precision="round_trip"``, its default may differ in the last bit.
+    """
+    import pandas as pd
+
+    if int(pd.__version__.split(".")[0]) >= 3:
+        return pd.read_csv(path)
+    return pd.read_csv(path, float_precision="round_trip")
+
+
+def compare_rows(published, fresh, columns=ACCURACY_COLUMNS, rtol: dict | None = None) -> list[str]:
+    """Differences between the rows of ``fresh`` and the same (method, scenario,
+    [condition,] seed) rows of ``published``, in ``columns``, compared exactly (NaN equals
+    NaN), or where ``rtol`` names a column's relative tolerance, within it.
+
+    Returns one line per missing row or differing value; empty when they agree.
+    """
+    rtol = rtol or {}
+    published, fresh = with_condition(published), with_condition(fresh)
+    keys = ["method", "scenario", "condition", "seed"]
+    pub = published.set_index(keys)
+    problems = []
+    for row in fresh.itertuples(index=False):
+        row = row._asdict()
+        key = tuple(row[k] for k in keys)
+        if key not in pub.index:
+            problems.append(f"{key}: not in the published rows")
+            continue
+        old = pub.loc[key]
+        for col in ("status",) + tuple(columns):
+            a, b = old[col], row[col]
+            if not _same(a, b, rtol.get(col)):
+                within = f" (beyond the relative tolerance {rtol[col]:g})" if col in rtol else ""
+                problems.append(f"{key} {col}: published {_plain(a)!r}, re-run {_plain(b)!r}{within}")
+    return problems
+
+
+def _same(a, b, rtol: float | None) -> bool:
+    both_float = isinstance(a, float) and isinstance(b, float)
+    if both_float and np.isnan(a) and np.isnan(b):
+        return True
+    if rtol is not None and both_float:
+        return abs(a - b) <= rtol * abs(a)
+    return a == b
+
+
+def _plain(value):
+    """A numpy scalar as the Python number it holds, so messages show ``0.1``, not ``np.float64(0.1)``."""
+    return value.item() if isinstance(value, np.generic) else value

@@ -29,6 +29,7 @@ from rippleb.scoring.metrics import METRIC_COLUMNS
 from rippleb.scoring.truthfree import TRUTH_FREE_COLUMNS
 from rippleb.engine.results import RunWarning, copy_rows, row_key, swept_columns
 from rippleb.engine.sealing import sealed_text
+from rippleb.report.publication import compare_rows, read_results_exact  # noqa: F401 - re-exported
 from rippleb.report.reading import READING_RECORDED, READING_SIMULATED  # noqa: F401 - re-exported
 from rippleb.report.tuning_table import tuning_markdown
 from rippleb.report.verdicts import method_verdicts
@@ -173,60 +174,6 @@ def holds_markdown(frame, sweeps) -> str:
     from rippleb.report.holds import blocks_markdown, holds_blocks
 
     return blocks_markdown(holds_blocks(frame, sweeps))
-
-
-def read_results_exact(path):
-    """A results CSV with every float parsed back to the exact double that was written.
-
-    pandas >= 3 parses with round-trip precision by default (and deprecates the option);
-    older pandas needs ``float_precision="round_trip"``, its default may differ in the last bit.
-    """
-    import pandas as pd
-
-    if int(pd.__version__.split(".")[0]) >= 3:
-        return pd.read_csv(path)
-    return pd.read_csv(path, float_precision="round_trip")
-
-
-def compare_rows(published, fresh, columns=ACCURACY_COLUMNS, rtol: dict | None = None) -> list[str]:
-    """Differences between the rows of ``fresh`` and the same (method, scenario,
-    [condition,] seed) rows of ``published``, in ``columns``, compared exactly (NaN equals
-    NaN), or where ``rtol`` names a column's relative tolerance, within it.
-
-    Returns one line per missing row or differing value; empty when they agree.
-    """
-    rtol = rtol or {}
-    published, fresh = with_condition(published), with_condition(fresh)
-    keys = ["method", "scenario", "condition", "seed"]
-    pub = published.set_index(keys)
-    problems = []
-    for row in fresh.itertuples(index=False):
-        row = row._asdict()
-        key = tuple(row[k] for k in keys)
-        if key not in pub.index:
-            problems.append(f"{key}: not in the published rows")
-            continue
-        old = pub.loc[key]
-        for col in ("status",) + tuple(columns):
-            a, b = old[col], row[col]
-            if not _same(a, b, rtol.get(col)):
-                within = f" (beyond the relative tolerance {rtol[col]:g})" if col in rtol else ""
-                problems.append(f"{key} {col}: published {_plain(a)!r}, re-run {_plain(b)!r}{within}")
-    return problems
-
-
-def _same(a, b, rtol: float | None) -> bool:
-    both_float = isinstance(a, float) and isinstance(b, float)
-    if both_float and np.isnan(a) and np.isnan(b):
-        return True
-    if rtol is not None and both_float:
-        return abs(a - b) <= rtol * abs(a)
-    return a == b
-
-
-def _plain(value):
-    """A numpy scalar as the Python number it holds, so messages show ``0.1``, not ``np.float64(0.1)``."""
-    return value.item() if isinstance(value, np.generic) else value
 
 
 def readme_markdown(frame, prov: dict, figures: dict, *, published: bool = False,

@@ -46,10 +46,10 @@ def test_each_claim_says_where_along_the_parameter_it_holds():
             f"`{PARAM}` = 0.0002; `b` leads at `{PARAM}` = 0.0003.") in text
     assert (f"the lowest mean under `same-session`: `a` for `{PARAM}` <= 0.0001; `b` for `{PARAM}` >= 0.0002."
             in text)
-    row = next(line for line in text.splitlines() if line.startswith("| `a` leads `b` under `same-session` "))
-    assert "(replicated in this report)" in row
+    row = next(line for line in text.splitlines() if line.startswith("| `a` against `b` under `same-session` "))
+    assert "(in this report: replicated)" in row
     assert [cell.strip() for cell in row.split("|")[2:-1]] == [
-        "leads (+0.0545 Nm, 10/10)", "leads (+0.0445 Nm, 10/10)", "not separated (-0.001 Nm, 5/10)",
+        "`a` leads (+0.0545 Nm, 10/10)", "`a` leads (+0.0445 Nm, 10/10)", "not separated (-0.001 Nm, 5/10)",
         "`b` leads (-0.0455 Nm, 0/10)"]
     assert f"`{PARAM}`: sweep `runs/sw`, 3 methods, 2 scenarios, 10 devices" in text
     rank = next(b for b in blocks if b[0] == "h4")
@@ -60,7 +60,9 @@ def test_each_claim_says_where_along_the_parameter_it_holds():
 def test_a_claim_whose_methods_the_sweep_did_not_run_is_left_out():
     sweep = _sweep()
     text = blocks_markdown(holds_blocks(REPORT, [("s", sweep[sweep["method"] != "b"])]))
-    assert "`a` against `b`" not in text and "the lowest mean under `same-session`: `a` at every value" in text
+    assert "the lowest mean under `same-session`: `a` at every value" in text
+    assert "| `a` against `b`" not in text
+    assert "No sweep ran the two methods and the condition of: `a` against `b` under `same-session`." in text
 
 
 def test_a_grid_of_two_parameters_is_read_one_parameter_at_a_time():

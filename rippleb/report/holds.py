@@ -59,14 +59,22 @@ def holds_blocks(frame, sweeps) -> list[tuple[str, object]]:
     summary = condition_summary(frame)
     leaders = {c: g.iloc[0]["method"] for c, g in summary.dropna(subset=["mean"]).groupby("condition", sort=False)}
     blocks = [("h2", TITLE), ("p", INTRO)]
+    covered = set()
     for name, rows in sweeps:
         rows = with_condition(rows)
+        ran = ok_rows(rows)
+        covered |= {c.key for c in claims if c.key in set(ran["condition"])
+                    and {c.first, c.second} <= set(ran["method"])}
         for column in swept_columns(rows.columns):
             others = [c for c in swept_columns(rows.columns) if c != column]
             for fixed, part in (rows.groupby(others, sort=True) if others else [((), rows)]):
                 fixed = fixed if isinstance(fixed, tuple) else (fixed,)
                 label = "".join(f", `{c}` = {v:g}" for c, v in zip(others, fixed))
                 blocks += _one_parameter(name, column, label, part, claims, leaders)
+    missed = [c for c in claims if c.key not in covered]
+    if missed:
+        blocks.append(("p", "No sweep ran the two methods and the condition of: " + "; ".join(
+            f"`{c.first}` against `{c.second}` under `{c.key}`" for c in missed) + "."))
     return blocks
 
 
@@ -86,7 +94,7 @@ def _one_parameter(name, column, label, rows, claims, leaders) -> list[tuple[str
         if claim.key not in conditions or not {claim.first, claim.second} <= set(methods):
             continue
         verdicts = _lead_verdicts(claim, [per_value[(claim.key, v)] for v in values])
-        what = f"`{claim.first}` leads `{claim.second}` under `{claim.key}` ({claim.status} in this report)"
+        what = f"`{claim.first}` against `{claim.second}` under `{claim.key}` (in this report: {claim.status})"
         table.append([what] + [text for _, text in verdicts])
         sentences.append(_ranges(f"`{claim.first}` against `{claim.second}` under `{claim.key}`", column, values,
                                  [word for word, _ in verdicts]))
@@ -136,7 +144,7 @@ def _lead_verdicts(claim, per_value) -> list[tuple[str, str]]:
         if test.verdict == "unknown":
             out.append(("no paired test", f"fewer than two devices ({test.n})"))
         elif test.verdict == "separated":
-            out.append((f"`{claim.first}` leads", f"leads ({numbers})"))
+            out.append((f"`{claim.first}` leads", f"`{claim.first}` leads ({numbers})"))
         elif test.p < 0.05:     # separated the other way
             out.append((f"`{claim.second}` leads", f"`{claim.second}` leads ({numbers})"))
         else:

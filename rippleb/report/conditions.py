@@ -117,7 +117,8 @@ def headline_lines(frame, column: str = "rms_error_nm") -> list[str]:
            f"{c.replication.n} replication devices." for c in made]
     if not made:
         out.append("No claim of who leads under a condition replicated, so there is no headline." if claims
-                   else "No claim of who leads could be made (fewer than two methods with ok rows).")
+                   else "No claim of who leads could be made (fewer than two methods with ok rows on the "
+                        "discovery devices, the even seeds).")
     others = [c for c in claims if not c.headline]
     if others:
         out.append("No headline: " + "; ".join(f"`{c.first}` against `{c.second}` under `{c.key}` ({c.status})"

@@ -75,9 +75,9 @@ def published_salt_file(results_dir) -> Path:
     return path
 
 
-def verify(results_dir, keys, *, jobs: int = 1, columns=None, rtol: dict | None = None) -> list[str]:
+def rerun(results_dir, keys, *, jobs: int = 1):
     """Re-run rows of the sealed publication in ``results_dir`` on their devices (its
-    published salt) and compare them with the published rows.
+    published salt, checked against its commitment).
 
     Parameters
     ----------
@@ -87,29 +87,38 @@ def verify(results_dir, keys, *, jobs: int = 1, columns=None, rtol: dict | None 
         ``(method, scenario, condition, seed)`` of each row to re-run.
     jobs
         Rows run at once.
-    columns, rtol
-        As in :func:`rippleb.report.writer.compare_rows` (default: every accuracy column,
-        exactly).
 
     Returns
     -------
-    list of str
-        One line per differing value or missing row; empty when every row re-ran the same.
+    pandas.DataFrame
+        The re-run rows, read back from the files the runner wrote, as the published rows
+        are read (:func:`read_results_exact`).
     """
     import pandas as pd
 
     from rippleb.engine.runner import run
 
     salt = published_salt_file(results_dir)
-    published = read_results_exact(Path(results_dir) / "results.csv")
     fresh = []
     with tempfile.TemporaryDirectory(prefix="rippleb-verify-") as tmp:
         for i, (method, scenario, condition, seed) in enumerate(keys):
             out = Path(tmp) / f"row{i}"
             run([method], [scenario], [int(seed)], conditions=[condition], jobs=jobs, out=out, salt_file=salt)
-            fresh.append(read_results_exact(out / "results.csv"))   # as the published rows were read
-    return compare_rows(published, pd.concat(fresh, ignore_index=True),
-                        columns=ACCURACY_COLUMNS if columns is None else columns, rtol=rtol)
+            fresh.append(read_results_exact(out / "results.csv"))
+    return pd.concat(fresh, ignore_index=True)
+
+
+def verify(results_dir, keys, *, jobs: int = 1, columns=ACCURACY_COLUMNS) -> list[str]:
+    """:func:`rerun` the rows ``keys`` of the publication in ``results_dir`` and compare them
+    with the published rows in ``columns``, exactly (:func:`compare_rows`).
+
+    Returns
+    -------
+    list of str
+        One line per differing value or missing row; empty when every row re-ran the same.
+    """
+    published = read_results_exact(Path(results_dir) / "results.csv")
+    return compare_rows(published, rerun(results_dir, keys, jobs=jobs), columns=columns)
 
 
 def read_results_exact(path):

@@ -12,7 +12,7 @@ import numpy as np
 
 from rippleb.scenario import REFERENCE_TEMPERATURE_C, Scenario
 from rippleb.mismatch import Unmodelled
-from rippleb.simulator import daq, gauge
+from rippleb.simulator import daq, flexspline, gauge
 from rippleb.simulator.device import Device
 from rippleb.simulator.ripple import bridge_ripple
 
@@ -61,6 +61,22 @@ def strain_bridge(device: Device, sc: Scenario, t, theta_m, tau, noise, output_a
         volts = volts + sc.faults.bridge_drift * t
     # fault: a lower full scale (amplifier gain set too high) clips the peaks
     return quantise(volts, sc.faults.strain_full_scale or STRAIN_RANGE, knobs.adc_bits)
+
+
+def gauge_channels(device: Device, sc: Scenario, t, theta_m, tau, noise, output_angle,
+                   knobs: Unmodelled = IDEAL, rebonded: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(strain, channels)`` [V]: the bridge of each channel of the scenario's gauge layout
+    (:mod:`rippleb.simulator.flexspline`) through :func:`strain_bridge`, and their mean as
+    the ``strain`` column; ``channels`` (samples x channels) only for a layout with several.
+
+    ``rebonded``: the gauges of a re-assembled joint (their errors drawn anew).
+    """
+    devices = flexspline.channel_devices(device, sc.gauges, sc.temperature_c, rebonded)
+    volts = [strain_bridge(d, sc, t, theta_m, tau, noise, output_angle, knobs) for d in devices]
+    if len(volts) == 1:
+        return volts[0], None
+    channels = np.column_stack(volts)
+    return channels.mean(axis=1), channels
 
 
 def current_sense(sc: Scenario, commanded: np.ndarray, offset: float, noise) -> np.ndarray:

@@ -35,7 +35,7 @@ from rippleb.simulator.conditions import DEFAULT_CONDITION, calibration_conditio
 from rippleb.simulator.device import Device, check_seed
 from rippleb.simulator.encoder import EncoderErrors, counts, missed_counts
 from rippleb.simulator.joint import load_table
-from rippleb.simulator.sensors import current_sense, dropouts, encoder_faults, strain_bridge
+from rippleb.simulator.sensors import current_sense, dropouts, encoder_faults, gauge_channels
 from rippleb.simulator.transmission import IDEAL as IDEAL_GEAR, TransmissionError
 
 
@@ -127,7 +127,8 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     else:
         torque_gear = np.zeros(n)
 
-    strain = strain_bridge(device, sc, t, theta_m, tau_true, noise, output_angle=q, knobs=knobs)
+    strain, channels = gauge_channels(device, sc, t, theta_m, tau_true, noise, output_angle=q, knobs=knobs,
+                                      rebonded=session.rebonded)
     current = current_sense(sc, commanded, device.current_offset, noise)
     absolute = counts(theta_m, spec.counts_per_rev, errors)
     index = conditions.index_pulses(absolute, conditions.index_count(seed, spec.counts_per_rev),
@@ -147,12 +148,13 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
         fault_rng = np.random.default_rng(
             np.random.SeedSequence([seed, stable_hash(sc.name), stable_hash("faults")]))
         encoder = encoder_faults(encoder, sc.faults, spec.fs, fault_rng)
-        strain, encoder, current, index = dropouts((strain, encoder, current, index), sc.faults,
-                                                    spec.fs, fault_rng)
+        levels = (strain, encoder, current) if channels is None else (strain, encoder, current, channels)
+        strain, encoder, current, *kept, index = dropouts((*levels, index), sc.faults, spec.fs, fault_rng)
+        channels = kept[0] if kept else None
         meta["faults"] = {k: v for k, v in dataclasses.asdict(sc.faults).items() if v}
 
     log = SensorLog(spec=spec, t=t, strain=strain, encoder=encoder, current=current, index=index,
-                    torque_true=tau_true, torque_ref=tau_ref, meta=meta)
+                    channels=channels, torque_true=tau_true, torque_ref=tau_ref, meta=meta)
     start, stop = sc.evaluation
     return Simulation(log=log, moving=np.abs(qd_d) > 1e-12, wave_angle=theta_m,
                       joint_velocity=qd, eval_mask=(t >= start) & (t <= stop),

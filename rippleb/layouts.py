@@ -34,16 +34,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+#: Rings of ``2n + 1`` elements, one channel each: ``n`` = 1 (Godler et al.'s three gauges)
+#: to 4 (enough to null orders 2, 4, 6 and 8 by gain tuning).
+RING_SIZES = (3, 5, 7, 9)
 #: Every layout, in a fixed order: a sweep stores a layout as its position here, so names
 #: are only ever appended.
-LAYOUT_NAMES = ("paper", "paper-channels", "rosettes-4", "ring", "drawn")
+LAYOUT_NAMES = ("paper", "paper-channels", "rosettes-4") + tuple(f"ring-{n}" for n in RING_SIZES) + ("drawn",)
 DEFAULT_LAYOUT = "paper"
-#: Elements of the ``ring`` layout unless ``[gauges] count`` says otherwise: Godler et al.'s
-#: three gauges.
-RING_DEFAULT_COUNT = 3
-#: Most elements a ring may have: 2n+1 = 17 nulls eight orders, more than any source uses;
-#: the bound keeps a scenario from asking for thousands of channels.
-MAX_ELEMENTS = 17
 #: Gauges per sensing element: the paper's two perpendicular gauges.
 GAUGES_PER_ELEMENT = 2
 #: The largest multiple of the documented gauge errors a scenario may ask for.
@@ -96,13 +93,10 @@ class Layout:
         return np.radians(np.asarray(self.angles_deg, float))
 
 
-def layout(name: str, count: int | None = None) -> Layout:
-    """The layout ``name`` (``count``: the ring's number of elements, default
-    :data:`RING_DEFAULT_COUNT`; refused for the other layouts)."""
+def layout(name: str) -> Layout:
+    """The layout ``name`` (one of :data:`LAYOUT_NAMES`)."""
     if name not in LAYOUT_NAMES:
         raise ValueError(f"unknown gauge layout {name!r}; known: {', '.join(LAYOUT_NAMES)}")
-    if count is not None and name != "ring":
-        raise ValueError(f"count is the ring's number of elements; layout {name!r} has a fixed one")
     if name == "paper":
         return Layout(name, (0.0, 90.0), (0, 0),
                       "two sensing elements 90 deg apart in one full bridge (the default)",
@@ -117,15 +111,14 @@ def layout(name: str, count: int | None = None) -> Layout:
                       "four sensing elements 90 deg apart in one bridge",
                       "Taghirad & Belanger, IEEE TIM 47(4) 1998 (four rosettes); Hashimoto et al., "
                       "J. Robot. Mechatron. 3(4) 1991")
-    if name == "ring":
-        n = RING_DEFAULT_COUNT if count is None else int(count)
-        if not 2 <= n <= MAX_ELEMENTS:
-            raise ValueError(f"count must be within [2, {MAX_ELEMENTS}], got {n}")
+    if name.startswith("ring-"):
+        n = int(name[5:])
         return Layout(name, tuple(360.0 * i / n for i in range(n)), tuple(range(n)),
-                      f"{n} sensing elements equally spaced, each its own amplifier channel "
-                      f"(2n+1 elements null n orders by gain tuning)",
-                      "Godler, Ninomiya & Horiuchi, AMC 2000 (three gauges); Godler, Horiuchi & "
-                      "Hashimoto, US 6,840,118 (Harmonic Drive Systems; at least 2n+1 gauges)")
+                      f"{n} sensing elements equally spaced, each its own amplifier channel: "
+                      f"gain tuning nulls {(n - 1) // 2} order(s)",
+                      ("Godler, Ninomiya & Horiuchi, AMC 2000 (three gauges); " if n == 3 else "")
+                      + "Godler, Horiuchi & Hashimoto, US 6,840,118 (Harmonic Drive Systems: 2n+1 "
+                      "gauges null n orders)")
     return Layout(name, (), (), "the earlier simulator's bridge: a Fourier series drawn per device, "
                   "no geometry (kept to compare)", "rippleb before issue 42 (docs/physics.md)")
 
@@ -153,24 +146,21 @@ class GaugeSettings:
     ----------
     layout
         One of :data:`LAYOUT_NAMES` (default :data:`DEFAULT_LAYOUT`).
-    count
-        The ring's number of elements (``ring`` only; default :data:`RING_DEFAULT_COUNT`).
     misalignment
         The gauges' placement, orientation and gain errors in multiples of the documented
         sizes (docs/physics.md): 0 is a perfect installation, 1 the default.
     """
 
     layout: str = DEFAULT_LAYOUT
-    count: int | None = None
     misalignment: float = 1.0
 
     def resolved(self) -> Layout:
-        return layout(self.layout, self.count)
+        return layout(self.layout)
 
 
 #: Keys of the ``[gauges]`` table and their types (the first named in errors). A layout is
 #: a name; a sweep writes it as its position in :data:`LAYOUT_NAMES`, an integer.
-GAUGE_KEYS = {"layout": (str, int), "count": (int,), "misalignment": (float, int)}
+GAUGE_KEYS = {"layout": (str, int), "misalignment": (float, int)}
 
 
 def parse_gauges(raw: dict, fail) -> GaugeSettings:
@@ -184,16 +174,11 @@ def parse_gauges(raw: dict, fail) -> GaugeSettings:
         name = LAYOUT_NAMES[name]
     if name not in LAYOUT_NAMES:
         fail("gauges.layout", f"unknown layout {name!r}; known: {', '.join(LAYOUT_NAMES)}")
-    count = raw.get("count")
-    if count is not None and name != "ring":
-        fail("gauges.count", f"is the ring's number of elements; layout {name!r} has a fixed one")
-    if count is not None and not 2 <= count <= MAX_ELEMENTS:
-        fail("gauges.count", f"must be within [2, {MAX_ELEMENTS}], got {count}")
     misalignment = float(raw.get("misalignment", 1.0))
     if not 0.0 <= misalignment <= MAX_MISALIGNMENT:
         fail("gauges.misalignment", f"must be within [0, {MAX_MISALIGNMENT:g}] (multiples of the "
              f"documented gauge errors), got {misalignment:g}")
-    return GaugeSettings(layout=name, count=count, misalignment=misalignment)
+    return GaugeSettings(layout=name, misalignment=misalignment)
 
 
 __all__ = ["DEFAULT_LAYOUT", "GAUGE_KEYS", "GaugeSettings", "LAYOUT_NAMES", "Layout", "cancelled_orders",

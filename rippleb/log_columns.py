@@ -29,7 +29,7 @@ LOG_COLUMNS = SENSOR_COLUMNS + OPTIONAL_SENSOR_COLUMNS + TRUTH_COLUMNS
 #: A channel's column is this and its number, from 1 (docs/physics.md, "Gauges on the
 #: flexspline").
 CHANNEL_PREFIX = "strain_"
-#: Most channels a log may carry: far above any layout (a ring of 17 elements), low enough
+#: Most channels a log may carry: far above any layout (a ring of 9 elements), low enough
 #: that a file of thousands of ``strain_k`` columns is refused rather than read.
 MAX_CHANNELS = 64
 _CHANNEL = re.compile(r"strain_([1-9][0-9]*)")

@@ -12,7 +12,8 @@ import numpy as np
 
 from rippleb.scenario import REFERENCE_TEMPERATURE_C, Scenario
 from rippleb.mismatch import Unmodelled
-from rippleb.simulator import daq, flexspline, gauge
+from rippleb.simulator import daq, gauge
+from rippleb.simulator.conditions import stream
 from rippleb.simulator.device import Device
 from rippleb.simulator.ripple import bridge_ripple
 
@@ -63,16 +64,19 @@ def strain_bridge(device: Device, sc: Scenario, t, theta_m, tau, noise, output_a
     return quantise(volts, sc.faults.strain_full_scale or STRAIN_RANGE, knobs.adc_bits)
 
 
-def gauge_channels(device: Device, sc: Scenario, t, theta_m, tau, noise, output_angle,
-                   knobs: Unmodelled = IDEAL, rebonded: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+def gauge_channels(devices, sc: Scenario, t, theta_m, tau, noise, output_angle,
+                   knobs: Unmodelled = IDEAL) -> tuple[np.ndarray, np.ndarray | None]:
     """``(strain, channels)`` [V]: the bridge of each channel of the scenario's gauge layout
-    (:mod:`rippleb.simulator.flexspline`) through :func:`strain_bridge`, and their mean as
-    the ``strain`` column; ``channels`` (samples x channels) only for a layout with several.
+    through :func:`strain_bridge`, ``devices`` the device each channel reads
+    (:func:`rippleb.simulator.flexspline.channel_devices`), and their mean as the ``strain``
+    column; ``channels`` (samples x channels) only for a layout with several.
 
-    ``rebonded``: the gauges of a re-assembled joint (their errors drawn anew).
+    The first channel's noise comes from the log's ``noise`` generator (so a one-channel
+    layout draws what the one bridge always drew), each further channel's from its own
+    stream: the current's noise, drawn after, is the same whatever the layout.
     """
-    devices = flexspline.channel_devices(device, sc.gauges, sc.temperature_c, rebonded)
-    volts = [strain_bridge(d, sc, t, theta_m, tau, noise, output_angle, knobs) for d in devices]
+    noises = [noise] + [stream(d.seed, sc.name, "gauge-channel", str(c)) for c, d in enumerate(devices) if c]
+    volts = [strain_bridge(d, sc, t, theta_m, tau, rng, output_angle, knobs) for d, rng in zip(devices, noises)]
     if len(volts) == 1:
         return volts[0], None
     channels = np.column_stack(volts)

@@ -76,11 +76,12 @@ def tuned_weights(channels: np.ndarray, torque: np.ndarray, angle: np.ndarray, m
     k = channels.shape[1]
     normal = harmonics.T @ harmonics
     lam = ridge * np.trace(normal) / k
-    a = normal + lam * np.eye(k)
-    equal = np.full(k, 1.0 / k)
-    towards, along = np.linalg.solve(a, lam * equal), np.linalg.solve(a, gains)
-    mu = (gains.mean() - gains @ towards) / (gains @ along)
-    return towards + mu * along
+    # the constrained least squares as one linear system (Lagrange): [[A, g], [g', 0]]
+    # [w, mu] = [lam / K, mean g]; it stays solvable where A alone is singular (ridge 0
+    # with more channels than the harmonics constrain)
+    system = np.block([[normal + lam * np.eye(k), gains[:, None]], [gains[None, :], np.zeros((1, 1))]])
+    rhs = np.concatenate([np.full(k, lam / k), [gains.mean()]])
+    return np.linalg.lstsq(system, rhs, rcond=None)[0][:k]
 
 
 def compensated(data, weights):

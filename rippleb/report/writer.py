@@ -29,6 +29,7 @@ from rippleb.metrics import METRIC_COLUMNS
 from rippleb.truthfree import TRUTH_FREE_COLUMNS
 from rippleb.engine.results import RunWarning, copy_rows, row_key, swept_columns
 from rippleb.engine.sealing import sealed_text
+from rippleb.report.layouts_section import layouts_markdown
 from rippleb.report.tuning_table import tuning_markdown
 from rippleb.report.verdicts import method_verdicts
 from rippleb.report.stats import (CONFIDENCE, METHOD_ORDER, fmt_interval, interval_frame,  # noqa: F401
@@ -104,6 +105,7 @@ def tables_markdown(frame) -> str:
              condition_summary_markdown(frame), ""]
     parts += [f"- {s}" for s in condition_headline(frame)] + [""]
     parts += _gear_section(frame)
+    parts += layouts_markdown(frame)
     verdicts = method_verdicts(frame)
     if verdicts:
         parts += ["### Each method in plain words", "",

@@ -62,18 +62,27 @@ def tick_means(log) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return mean(log.channels), mean(log.torque_ref), angle
 
 
-def tuned_weights(channels: np.ndarray, torque: np.ndarray, angle: np.ndarray, max_order: int,
-                  ridge: float) -> np.ndarray:
-    """The channel weights that null the ripple harmonics of the sum at the plain mean's
-    torque gain, from per-tick ``channels``, ``torque`` (the reference) and ``angle``.
-
-    Minimises ``|M w|^2 + lam |w - 1/K|^2`` subject to ``g . w = mean(g)``, ``M`` the channels'
-    harmonic coefficients, ``g`` their torque gains, ``lam = ridge x trace(M'M) / K``.
-    """
+def harmonic_coefficients(channels: np.ndarray, torque: np.ndarray, angle: np.ndarray, max_order: int,
+                          extra: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(g, M)``: each channel's torque gain and its harmonic coefficients (rows of
+    :func:`harmonic_design` but the first two), by least squares on per-tick ``channels``,
+    ``torque`` (the reference) and ``angle``; ``extra`` regressors are fitted beside and left
+    out of ``M`` (a variant's model of other signals)."""
     load_scale = max(float(np.sqrt(np.mean(torque ** 2))), 1e-9)
-    coef = np.linalg.lstsq(harmonic_design(angle, torque, max_order, load_scale), channels, rcond=None)[0]
-    gains, harmonics = coef[1], coef[2:]
-    k = channels.shape[1]
+    design = harmonic_design(angle, torque, max_order, load_scale)
+    width = design.shape[1]
+    if extra is not None:
+        design = np.hstack([design, extra])
+    scale = np.maximum(np.linalg.norm(design, axis=0), 1e-300)   # columns of other units: unit columns
+    coef = np.linalg.lstsq(design / scale, channels, rcond=None)[0] / scale[:, None]
+    return coef[1], coef[2:width]
+
+
+def null_weights(gains: np.ndarray, harmonics: np.ndarray, ridge: float) -> np.ndarray:
+    """The channel weights that null the harmonics at the plain mean's torque gain:
+    minimise ``|M w|^2 + lam |w - 1/K|^2`` subject to ``g . w = mean(g)``,
+    ``lam = ridge x trace(M'M) / K``."""
+    k = len(gains)
     normal = harmonics.T @ harmonics
     lam = ridge * np.trace(normal) / k
     # the constrained least squares as one linear system (Lagrange): [[A, g], [g', 0]]
@@ -82,6 +91,13 @@ def tuned_weights(channels: np.ndarray, torque: np.ndarray, angle: np.ndarray, m
     system = np.block([[normal + lam * np.eye(k), gains[:, None]], [gains[None, :], np.zeros((1, 1))]])
     rhs = np.concatenate([np.full(k, lam / k), [gains.mean()]])
     return np.linalg.lstsq(system, rhs, rcond=None)[0][:k]
+
+
+def tuned_weights(channels: np.ndarray, torque: np.ndarray, angle: np.ndarray, max_order: int,
+                  ridge: float) -> np.ndarray:
+    """The channel weights that null the ripple harmonics of the sum at the plain mean's
+    torque gain, from per-tick ``channels``, ``torque`` (the reference) and ``angle``."""
+    return null_weights(*harmonic_coefficients(channels, torque, angle, max_order), ridge)
 
 
 def compensated(data, weights):

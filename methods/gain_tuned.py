@@ -101,9 +101,14 @@ def tuned_weights(channels: np.ndarray, torque: np.ndarray, angle: np.ndarray, m
 
 
 def compensated(data, weights):
-    """``data`` (a log or a block) with ``strain`` the weighted sum of its channels."""
-    if weights is None or data.channels is None:
+    """``data`` (a log or a block) with ``strain`` the weighted sum of its channels; a log
+    whose channels are not those the weights were tuned on is refused in one line."""
+    if weights is None:
         return data
+    count = 0 if data.channels is None else data.channels.shape[1]
+    if count != len(weights):
+        raise ValueError(f"the calibration log has {len(weights)} strain channels, this log {count}: "
+                         f"tuned gains need the same channels in both")
     return dataclasses.replace(data, strain=data.channels @ weights)
 
 

@@ -106,6 +106,15 @@ def test_gain_tuned_passes_the_conformance_checks_on_a_log_with_channels(then):
                  then=then)
 
 
+def test_a_log_without_the_calibrations_channels_is_refused_in_one_line():
+    log, _ = channel_log(3, (2,), seed=1, seconds=0.5)
+    method = GainTuned()
+    method.fit(log.for_method(keep_ref=True))
+    method.reset(log.spec)
+    with pytest.raises(ValueError, match="has 3 strain channels, this log 0"):
+        method.step(dataclasses.replace(next(log.blocks()), channels=None))
+
+
 def test_gain_tuned_passes_the_conformance_checks_on_the_default_logs():
     check_method(GainTuned)
 

@@ -75,7 +75,8 @@ class Layout:
 
     @property
     def gauges(self) -> int:
-        """Strain gauges bonded: two per element (one for ``drawn``, which has no geometry)."""
+        """Strain gauges bonded: two per element (``drawn``, without geometry, stands for the
+        paper's bridge of four)."""
         return GAUGES_PER_ELEMENT * self.elements or GAUGES_PER_ELEMENT * 2
 
     @property

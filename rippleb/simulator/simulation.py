@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rippleb.data import JointSpec, SensorLog
+from rippleb.layouts import GaugeSettings
 from rippleb.scenario import Scenario, load_scenario
 from rippleb.simulator import conditions, controller
 from rippleb.mismatch import describe
@@ -148,6 +149,8 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
             "condition": condition if sc.scored else calibration_condition(condition)}
     if knobs.active:
         meta["unmodelled"] = describe(knobs)
+    if sc.gauges != GaugeSettings():
+        meta["gauges"] = dataclasses.asdict(sc.gauges)
     if sc.faults.active:
         # Own generator: a faulty scenario's healthy signals stay those of the same
         # scenario without faults, and scenarios without faults are untouched.

@@ -23,7 +23,7 @@ import numpy as np
 from rippleb.layouts import DEFAULT_LAYOUT, layout
 from rippleb.report.markdown import markdown
 from rippleb.report.paired import paired_lead
-from rippleb.report.stats import fmt_interval, method_order, ok_rows, t_interval
+from rippleb.report.stats import condition_order, fmt_interval, method_order, ok_rows, t_interval
 
 LAYOUT_COLUMN = "gauges.layout"
 MISALIGNMENT_COLUMN = "gauges.misalignment"
@@ -107,7 +107,7 @@ def layouts_markdown(frame) -> list[str]:
              "tuned on the calibration log, `gain-tuned[then=X]` the method X on the tuned sum. "
              "Cost: gauges, amplifier channels, and the method's median µs per control tick (timing on "
              "a shared machine: read it as an order).", ""]
-    for condition in frame["condition"].unique():
+    for condition in condition_order(frame["condition"].unique()):
         rows = combination_table(frame, condition)
         if not rows:
             continue

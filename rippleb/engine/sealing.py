@@ -41,6 +41,7 @@ import sys
 from pathlib import Path
 
 from rippleb.errors import InputError
+from rippleb.printable import markdown_code
 
 SALT_BYTES = 32
 #: The result column that marks the rows of a sealed run (absent from unsealed runs).
@@ -261,5 +262,5 @@ def sealed_text(frame, run: dict) -> str:
                 f"others on the public seeds' devices (rows of different runs mixed?); only the "
                 f"sealed rows are safe from a method that re-simulates its scenario.")
     return (f"Sealed: all {n} rows ran on devices drawn from a secret salt (commitment "
-            f"`{commitment_text}` in run.json), so no method could re-simulate them; the signal "
+            f"{markdown_code(commitment_text)} in run.json), so no method could re-simulate them; the signal "
             f"figures, re-simulated by the report, show the public seeds' devices instead.")

@@ -138,17 +138,21 @@ def _gear_section(frame) -> list[str]:
 def _condition_section(condition: str, rows, source: str) -> list[str]:
     from rippleb.simulator.conditions import CONDITIONS
 
+    from rippleb.printable import markdown_code, markdown_text
+
     what = CONDITIONS.get(condition, "not a built-in condition")
-    parts = [f"## Condition `{condition}`: {what}", ""]
+    parts = [f"## Condition {markdown_code(condition)}: {what}", ""]
     parts += [f"- {s}" for s in headline_sentences(rows)] + [""]
     for column, (title, unit) in MATRIX_COLUMNS.items():
         if column in rows and rows[column].notna().any():  # older rows, or n/a everywhere
-            parts += [f"### `{column}`: {title} [{unit}] ({condition})", "", matrix_markdown(rows, column), ""]
+            parts += [f"### `{column}`: {title} [{unit}] ({markdown_text(condition)})", "",
+                      matrix_markdown(rows, column), ""]
     if "us_per_tick_p99" in rows:
-        parts += [f"### Compute time of one control tick, p50 / p99 [us] ({condition})", "",
+        parts += [f"### Compute time of one control tick, p50 / p99 [us] ({markdown_text(condition)})", "",
                   timing_markdown(rows), ""]
-    parts += [f"### Ranking per scenario by `rms_error_nm` ({condition})", "", ranking_markdown(rows), ""]
-    parts += [f"### The paper's Table I, replicated ({condition})", "", table_one_markdown(rows, source), ""]
+    parts += [f"### Ranking per scenario by `rms_error_nm` ({markdown_text(condition)})", "", ranking_markdown(rows), ""]
+    parts += [f"### The paper's Table I, replicated ({markdown_text(condition)})", "",
+              table_one_markdown(rows, source), ""]
     return parts
 
 

@@ -27,6 +27,7 @@ import numpy as np
 
 from rippleb.errors import InputError
 from rippleb.files import atomic_path
+from rippleb.reading import LOG_BYTES, check_file, read_table
 from rippleb.timebase import check_steps, uniform_rate
 
 SENSOR_COLUMNS = ("t", "strain", "encoder", "current")
@@ -47,6 +48,9 @@ SMALLEST_NORMAL = float(np.finfo(float).tiny)
 #: Simulated loads stay below it; a recorded log's estimate beyond it is not scored
 #: (:mod:`rippleb.scorable`).
 MAX_TORQUE_FACTOR = 10.0
+#: Most samples a recorded log may hold: 20 million, 1000 s at 20 kHz, twice the longest
+#: simulated scenario (:data:`rippleb.scenario.MAX_SAMPLES`); more is read no further.
+MAX_LOG_SAMPLES = 20_000_000
 
 
 @dataclass(frozen=True)
@@ -281,25 +285,22 @@ def read_log(path: str | Path, spec: JointSpec | None = None, *, joint=None,
 
     ``meta["joint"]`` lists, per value the log is read with, whether it was given or assumed.
     """
-    import pandas as pd
-
     from rippleb import joint_file
 
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".csv", ".parquet"):
         raise InputError(f"{path}: unsupported log format {suffix or '(none)'!r}; use .csv or .parquet")
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
+    try:   # a regular file of at most LOG_BYTES: not a FIFO (a hang), a device or a giant
+        check_file(path, LOG_BYTES, "log")
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file") from None
     given = joint_file.load_joint(joint) if isinstance(joint, (str, Path)) else joint
     description = joint_file.description_for(path, given)
     twice = _duplicated_columns(path, suffix)
     if twice:
         raise InputError(f"{path}: column {', '.join(twice)} appears more than once; keep one")
-    try:
-        frame = pd.read_csv(path) if suffix == ".csv" else pd.read_parquet(path)
-    except Exception as exc:  # pandas raises many types for unreadable files
-        raise InputError(f"{path}: cannot read as {suffix[1:]}: {str(exc).splitlines()[0]}") from None
+    frame = read_table(path, MAX_LOG_SAMPLES, "log")
     columns, units = joint_file.map_columns(frame, description, str(path), LOG_COLUMNS)
     if not joint_file.index_wanted(description, columns, str(path)):
         columns.pop("index", None)

@@ -21,7 +21,6 @@ its one file. :func:`describe` says, per value, whether it was given or assumed.
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -85,15 +84,13 @@ def load_joint(path: str | Path, *, sidecar: bool = False) -> JointDescription:
     A ``--joint`` file holds the ``[joint]`` table alone; a sidecar may hold other tables
     of its own (notes, the bench), which rippleb leaves alone.
     """
+    from rippleb.reading import TOML_BYTES, parse_toml, read_text
+
     path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    try:   # a regular file of at most TOML_BYTES (a FIFO once hung the run), nested a few deep
+        raw = parse_toml(read_text(path, TOML_BYTES, "joint file"), path)
     except FileNotFoundError:
         raise InputError(f"{path}: no such joint file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{path}: not valid TOML: {exc}") from None
     extra = sorted(set(raw) - {"joint"})
     if extra and not sidecar:
         raise InputError(f"{path}: {extra[0]}: unknown key; a joint file holds a [joint] table")

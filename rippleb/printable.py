@@ -89,3 +89,29 @@ def markdown_code(value) -> str:
     # first and last space: pad it with one each
     pad = " " if text[0] == "`" or text[-1] == "`" or (text[0] == text[-1] == " " and text.strip()) else ""
     return f"{fence}{pad}{text}{pad}{fence}"
+
+
+# --------------------------------------------------------------------------- CSV
+
+#: The first characters that make a spreadsheet (Excel, LibreOffice, Google Sheets) read a
+#: cell as a formula, or that it drops before doing so (tab, CR, LF: OWASP, "CSV
+#: Injection"), and the quote that marks a neutralised cell, so that a cell which starts
+#: with a quote of its own reads back unchanged.
+CSV_ACTIVE = ("=", "+", "-", "@", "\t", "\r", "\n", "'")
+
+
+def csv_text(value) -> str:
+    """A text cell as a CSV file holds it: ``value`` with a ``'`` before it when it starts
+    with one of :data:`CSV_ACTIVE`, which a spreadsheet shows as text (and hides). A
+    number's cell is never given here: ``-0.5`` stays a number. :func:`csv_read` undoes it.
+
+    >>> csv_text('=HYPERLINK("http://e","x")'), csv_text("raw"), csv_read(csv_text("'q"))
+    ('\\'=HYPERLINK("http://e","x")', 'raw', "'q")
+    """
+    text = str(value)
+    return f"'{text}" if text[:1] in CSV_ACTIVE else text
+
+
+def csv_read(cell: str) -> str:
+    """The text of a cell :func:`csv_text` wrote (one leading ``'`` dropped)."""
+    return cell[1:] if cell[:1] == "'" else cell

@@ -21,7 +21,6 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import importlib.resources
-import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -104,12 +103,10 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         One line ``<file>: <key>: <what is wrong>`` for a file that is not TOML, an
         unknown key, a wrong type or an impossible value; or for an unknown name.
     """
+    from rippleb.reading import parse_toml
+
     text, path, name = read_source(name_or_path)
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{path}: not valid TOML: {exc}") from None
-    return Parser(path, name).scenario(raw)
+    return Parser(path, name).scenario(parse_toml(text, path))
 
 
 def scenario_from_dict(raw: dict, name: str = "custom") -> Scenario:
@@ -121,14 +118,14 @@ def scenario_from_dict(raw: dict, name: str = "custom") -> Scenario:
 
 
 def read_source(name_or_path) -> tuple[str, Path, str]:
+    from rippleb.reading import TOML_BYTES, read_text
+
     candidate = Path(name_or_path)
-    if candidate.suffix == ".toml" or candidate.is_file():
-        if not candidate.is_file():
-            raise InputError(f"{candidate}: no such scenario file")
-        try:
-            return candidate.read_text(encoding="utf-8"), candidate, candidate.stem
-        except (OSError, UnicodeDecodeError) as exc:
-            raise InputError(f"{candidate}: cannot read: {exc}") from None
+    if candidate.suffix == ".toml" or candidate.exists():
+        try:   # a regular file of at most TOML_BYTES: not a FIFO, a device or a giant
+            return read_text(candidate, TOML_BYTES, "scenario file"), candidate, candidate.stem
+        except FileNotFoundError:
+            raise InputError(f"{candidate}: no such scenario file") from None
     name = str(name_or_path)
     if not name or any(c in name for c in "/\\") or name.startswith("."):
         # a name is not a path: it must not reach files outside the built-ins

@@ -167,8 +167,11 @@ def _resumed_seal(out: Path, salt_file) -> Seal | None:
 
 def read_salt(path) -> bytes:
     """The salt in ``path`` (``-``: standard input): 64 hex digits."""
+    from rippleb.reading import SECRET_BYTES, read_text
+
     try:
-        text = sys.stdin.read() if str(path) == "-" else Path(path).read_text(encoding="ascii")
+        text = sys.stdin.read(SECRET_BYTES + 1) if str(path) == "-" else \
+            read_text(path, SECRET_BYTES, "salt file", encoding="ascii")
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{_name(path)}: cannot read the salt: {getattr(exc, 'strerror', None) or exc}") from None
     words = text.split()

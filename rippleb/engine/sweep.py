@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import copy
 import itertools
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -96,10 +95,11 @@ def swept_scenario(name_or_path, point: dict):
     impossible combination (e.g. a control rate above the swept sample rate) is refused
     with the file, key and the swept values named.
     """
+    from rippleb.reading import parse_toml
     from rippleb.scenario import Parser, read_source
 
     text, path, name = read_source(name_or_path)
-    raw = apply(tomllib.loads(text), point)
+    raw = apply(parse_toml(text, path), point)
     where = ", ".join(f"{k}={v}" for k, v in point.items())
     try:
         return Parser(path, name).scenario(raw)

@@ -125,10 +125,7 @@ def plot_order_spectra(out_png: str | Path, seed: int = 0,
     fig.suptitle(f"Strain spectra of simulated device seed {seed} under a 20 Nm load "
                  f"(replica of Jung et al. 2017, Fig. 2); bar = 2, 4, 8 x speed", fontsize=10)
     fig.tight_layout()
-    out = Path(out_png)
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
+    return _save(fig, out_png, dpi=120)
 
 
 def plot_trajectory(sig: ScenarioSignals, out_png) -> Path:

@@ -112,10 +112,13 @@ def _pyplot():
     return plt
 
 
-def _save(fig, out_png) -> Path:
+def _save(fig, out_png, dpi: int = 110) -> Path:
+    from rippleb.files import atomic_path
+
     out = Path(out_png)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
+    with atomic_path(out) as tmp:   # replaced, never written through (a link there is replaced)
+        fig.savefig(tmp, dpi=dpi)
     fig.clf()
     _pyplot().close(fig)
     return out

@@ -6,7 +6,6 @@ report`` adds its own and prints both as a table (:func:`provenance_markdown`).
 
 from __future__ import annotations
 
-import json
 import os
 import platform
 import shlex
@@ -70,8 +69,10 @@ def environment_warnings(frame, run: dict) -> list[str]:
     changed at a ``--resume`` (recorded in ``run["environment_changes"]``), or the rows
     hold more than one rippleb, Python, numpy or numeric-path value, or rows that did not
     run the portable numeric paths (:mod:`rippleb.numerics`)."""
-    out = [f"the run was resumed on another environment ({'; '.join(change['changes'])}): "
-           f"{_portability_note(change)}" for change in run.get("environment_changes", [])]
+    changes = run.get("environment_changes")
+    out = [f"the run was resumed on another environment ({'; '.join(map(str, change['changes']))}): "
+           f"{_portability_note(change)}" for change in (changes if isinstance(changes, list) else [])
+           if isinstance(change, dict) and isinstance(change.get("changes"), list)]
     for col in ("rippleb_version", "python", "numpy", "numerics"):
         values = sorted(str(v) for v in frame[col].dropna().unique()) if col in frame else []
         if len(values) > 1:
@@ -98,7 +99,7 @@ def environment_changes(before: dict, after: dict) -> list[str]:
     two provenance records (entries one of them lacks are said to be unrecorded)."""
     changes = []
     for group in ("versions", "machine"):
-        old, new = before.get(group) or {}, after.get(group) or {}
+        old, new = (record.get(group) if isinstance(record.get(group), dict) else {} for record in (before, after))
         for name in sorted(set(old) | set(new)):
             if old.get(name) != new.get(name):
                 changes.append(f"{name}: {old.get(name, 'not recorded')} -> {new.get(name, 'not recorded')}")
@@ -171,14 +172,13 @@ def _git(root: Path, *args: str) -> str:
 def read_run_provenance(run_dir: Path) -> dict:
     """What ``rippleb run`` recorded in ``DIR/provenance.json`` (empty if the run was made
     through the Python API), with the selection of ``DIR/run.json``."""
+    from rippleb.reading import RUN_FILE_BYTES, parse_json, read_text
+
     out = {}
     for name in ("run.json", "provenance.json"):
         path = Path(run_dir) / name
-        if path.is_file():
-            try:
-                value = json.loads(path.read_text())
-            except (OSError, ValueError) as exc:
-                raise InputError(f"{path}: cannot read: {exc}") from None
+        if path.is_symlink() or path.exists():
+            value = parse_json(read_text(path, RUN_FILE_BYTES, "run file", in_run_dir=True), path)
             if not isinstance(value, dict):
                 raise InputError(f"{path}: not a rippleb run file (a JSON {type(value).__name__}, "
                                  f"expected an object)")

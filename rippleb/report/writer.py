@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from rippleb.errors import InputError
-from rippleb.files import atomic_path
+from rippleb.files import atomic_path, refuse_links
 from rippleb.report.provenance import (collect_provenance, environment_sentence, environment_warnings, git_state,
                                 provenance_markdown,  # noqa: F401
                                 read_run_provenance, seeds_text)
@@ -48,7 +48,7 @@ def load_rows(run_dir):
 
     run_dir = Path(run_dir)
     path = run_dir / "results.csv"
-    if not path.is_file():
+    if not (path.is_symlink() or path.exists()):   # a link, a FIFO: the reader says what it is
         raise InputError(f"{run_dir}: no results.csv (is this a rippleb run directory?)")
     results = ResultsFile(None)
     results.rows = verified_rows(run_dir, read_rows(path), path)
@@ -325,8 +325,11 @@ def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, arg
     """
     run_dir = Path(run_dir)
     frame = load_rows(run_dir)
+    if out is None:   # the run directory's own entry: never a link (one to elsewhere would take the report there)
+        refuse_links(run_dir, ["report"])
     out = Path(out) if out is not None else run_dir / "report"
     _mkdir(out)
+    refuse_links(out, REPORT_ENTRIES, also_in="figures")
     try:
         return _write_report(run_dir, out, frame, figures=figures, figure_seed=figure_seed, argv=argv,
                              published=published, html=html, figure_format=figure_format,
@@ -379,6 +382,10 @@ def _write_report(run_dir: Path, out: Path, frame, *, figures, figure_seed, argv
                           signals=signals)
     return {"readme": out / "README.md", "csv": out / "results.csv", "provenance": out / "provenance.json",
             "html": page, "figures": {k: v[0] for k, v in drawn.items()}, "warnings": warnings}
+
+
+#: What ``rippleb report`` writes in its directory; none may be a symbolic link (nor anything in figures/).
+REPORT_ENTRIES = ("README.md", "results.csv", "provenance.json", "index.html", "figures")
 
 
 def _mkdir(path: Path) -> None:

@@ -27,7 +27,7 @@ import numpy as np
 
 from rippleb.errors import InputError
 from rippleb.files import atomic_path
-from rippleb.reading import LOG_BYTES, check_file, read_table
+from rippleb.reading import LOG_BYTES, check_file, duplicated_columns, read_table
 from rippleb.timebase import check_steps, uniform_rate
 
 SENSOR_COLUMNS = ("t", "strain", "encoder", "current")
@@ -244,23 +244,6 @@ def _holds_booleans(values: np.ndarray) -> bool:
     return values.dtype.kind == "O" and any(isinstance(v, (bool, np.bool_)) for v in values)
 
 
-def _duplicated_columns(path: Path, suffix: str) -> list[str]:
-    """The log columns named more than once in the file's header (pandas would rename the
-    second ``strain`` to ``strain.1`` and read the first alone; Arrow refuses to choose)."""
-    try:
-        if suffix == ".csv":
-            import pandas as pd
-
-            names = [str(n) for n in pd.read_csv(path, header=None, nrows=1, dtype=str).iloc[0]]
-        else:
-            import pyarrow.parquet as pq
-
-            names = pq.read_schema(path).names
-    except Exception:  # noqa: BLE001 - unreadable: the read itself says why, naming the file
-        return []
-    return sorted({n for n in names if n in LOG_COLUMNS and names.count(n) > 1})
-
-
 def read_log(path: str | Path, spec: JointSpec | None = None, *, joint=None,
              resample: bool = False) -> SensorLog:
     """Read a log from CSV or Parquet and check its schema.
@@ -297,7 +280,7 @@ def read_log(path: str | Path, spec: JointSpec | None = None, *, joint=None,
         raise InputError(f"{path}: no such file") from None
     given = joint_file.load_joint(joint) if isinstance(joint, (str, Path)) else joint
     description = joint_file.description_for(path, given)
-    twice = _duplicated_columns(path, suffix)
+    twice = duplicated_columns(path, LOG_COLUMNS)
     if twice:
         raise InputError(f"{path}: column {', '.join(twice)} appears more than once; keep one")
     frame = read_table(path, MAX_LOG_SAMPLES, "log")

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rippleb.reading import check_joint_value
 from rippleb.errors import InputError
 from rippleb.timebase import TIME_UNITS, looks_like_epoch, to_seconds
 
@@ -125,9 +126,9 @@ def _joint_value(path: Path, key: str, value):
         return value
     if isinstance(value, bool) or not isinstance(value, (int, float)) or (kind is int and not isinstance(value, int)):
         raise InputError(f"{where}: must be a {'whole ' if kind is int else ''}number, got {value!r}")
-    if not np.isfinite(value) or value <= 0:
+    if not np.isfinite(value):
         raise InputError(f"{where}: must be positive, got {value!r}")
-    return kind(value)
+    return kind(check_joint_value(key, value, where))   # the ranges a scenario's [joint] has too
 
 
 def _column(path: Path, name: str, entry) -> Column:
@@ -182,6 +183,7 @@ def map_columns(frame, joint: JointDescription, source: str, wanted: tuple[str, 
     whether they were given. A mapped column the file lacks is an :class:`InputError`
     naming the joint file and the entry; an unmapped one is looked up under rippleb's name.
     """
+    _refuse_shared_columns(joint)
     columns, units = {}, {}
     for name in wanted:
         mapped = joint.columns.get(name)
@@ -199,6 +201,18 @@ def map_columns(frame, joint: JointDescription, source: str, wanted: tuple[str, 
     if "t" in columns:
         columns["t"] = _seconds(columns["t"], joint.columns.get("t"), units["t"])
     return columns, units
+
+
+def _refuse_shared_columns(joint: JointDescription) -> None:
+    """One line when two of rippleb's columns are mapped onto one column of the file (the
+    strain read as the current too gave ``ok`` rows of a joint that does not exist)."""
+    seen: dict[str, str] = {}
+    for name, column in joint.columns.items():
+        if column.name in seen:
+            raise InputError(f"{joint.sources[f'columns.{name}']}: joint.columns: {seen[column.name]} and {name} "
+                             f"both map the log's column {column.name!r}; each of rippleb's columns is one of "
+                             f"the log's")
+        seen[column.name] = name
 
 
 def _scaled(values, scale: float):

@@ -51,6 +51,24 @@ SECRET_BYTES = 4 * KIB
 #: How deep a JSON or TOML document may nest: rippleb's own files nest at most 6 deep.
 MAX_NESTING = 32
 
+#: The joint values rippleb accepts (a scenario's ``[joint]``, a log's joint file): beyond
+#: them a value describes no harmonic-drive joint, and its numbers overflow or divide by
+#: nothing into ``ok`` rows. docs/robustness.md, section 11, gives each bound's reason.
+JOINT_RANGES = {"fs": (100.0, 1.0e6), "control_rate": (10.0, 1.0e6), "gear_ratio": (1.0, 1000.0),
+                "counts_per_rev": (1, 2**24), "rated_torque": (0.01, 1.0e5), "torque_constant": (1.0e-4, 100.0),
+                "rotor_inertia": (1.0e-10, 10.0)}
+
+
+def check_joint_value(key: str, value, where: str):
+    """``value`` of joint field ``key`` if within :data:`JOINT_RANGES`, else one line naming ``where``."""
+    low, high = JOINT_RANGES[key]
+    if not value > 0:
+        raise InputError(f"{where}: must be positive, got {value!r}")
+    if not low <= value <= high:
+        raise InputError(f"{where}: must be in [{low:g}, {high:g}] (docs/robustness.md, section 11), got {value:g}")
+    return value
+
+
 _KINDS = ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
           (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a directory"))
 
@@ -161,6 +179,24 @@ def read_table(path: Path, max_rows: int, what: str):
         raise InputError(f"{path}: more than the {max_rows} rows a {what} may hold "
                          f"(docs/robustness.md, section 11); split it")
     return frame
+
+
+def duplicated_columns(path: Path, names_of_interest) -> list[str]:
+    """The columns among ``names_of_interest`` named more than once in a CSV or Parquet
+    file's header (pandas would rename the second ``strain`` to ``strain.1`` and read the
+    first alone; Arrow refuses to choose)."""
+    try:
+        if path.suffix.lower() == ".csv":
+            import pandas as pd
+
+            names = [str(n) for n in pd.read_csv(path, header=None, nrows=1, dtype=str).iloc[0]]
+        else:
+            import pyarrow.parquet as pq
+
+            names = pq.read_schema(path).names
+    except Exception:  # noqa: BLE001 - unreadable: the read itself says why, naming the file
+        return []
+    return sorted({n for n in names if n in names_of_interest and names.count(n) > 1})
 
 
 def nesting(value) -> int:

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from rippleb.data import MAX_TORQUE_FACTOR, JointSpec
+from rippleb.reading import check_joint_value
 from rippleb.errors import InputError
 from rippleb.mismatch import TABLES as _UNMODELLED_TABLES, parse_tables
 from rippleb.profiles import DEFAULT_RISE, Load, Segment, evaluate_segments  # noqa: F401 (re-exported)
@@ -71,8 +72,6 @@ _FAULT_KEYS = {"encoder_missed": _NUMBER, "encoder_spurious_rate": _NUMBER,
 #: Longest log a scenario may ask for, in samples (500 s at 20 kHz; the simulator holds
 #: a few dozen float arrays of this length). Longer would exhaust memory, not simulate.
 MAX_SAMPLES = 10_000_000
-#: Plausible ranges of joint values: beyond them the numbers overflow, not simulate.
-_JOINT_MAX = {"fs": 1.0e6, "gear_ratio": 1000.0, "counts_per_rev": 2**24}
 #: Lubricant temperatures the friction model is meant for [deg C].
 TEMPERATURE_RANGE = (-40.0, 150.0)
 #: An external load above this many times the rated torque would break the drive
@@ -212,10 +211,7 @@ class Parser:
     def spec(self, raw) -> JointSpec:
         values = self.table(raw, _JOINT_KEYS, "joint")
         for key, value in values.items():
-            if value <= 0:
-                self.fail(f"joint.{key}", f"must be positive, got {value}")
-            if key in _JOINT_MAX and value > _JOINT_MAX[key]:
-                self.fail(f"joint.{key}", f"must be at most {_JOINT_MAX[key]:g}, got {value:g}")
+            check_joint_value(key, value, f"{self.path}: joint.{key}")
         spec = JointSpec(**{k: (v if k == "counts_per_rev" else float(v)) for k, v in values.items()})
         if spec.control_rate > spec.fs:
             self.fail("joint.control_rate", f"{spec.control_rate} exceeds fs {spec.fs}")

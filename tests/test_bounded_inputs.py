@@ -22,15 +22,7 @@ import rippleb  # noqa: F401 - before numpy: the portable numeric paths
 from rippleb.cli import main
 from rippleb.printable import CSV_ACTIVE, csv_read, csv_text
 from test_bad_input import GOOD, _log_frame
-
-
-def _one_error(capsys, *words) -> str:
-    err = capsys.readouterr().err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("rippleb: error: "), err
-    for word in words:
-        assert word in lines[0], (word, lines[0])
-    return lines[0]
+from test_checked_input import _one_error
 
 
 # --------------------------------------------------------------------------- run directories

@@ -1,4 +1,4 @@
-"""The columns of a log: their names, the per-channel strain columns, a file's header.
+"""The columns of a log: their names and the per-channel strain columns.
 
 A log has the sensor columns, optional ones, and the truth of a simulation
 (:data:`LOG_COLUMNS`). A gauge layout with several amplifier channels
@@ -16,7 +16,6 @@ Examples
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 from rippleb.errors import InputError
 
@@ -61,21 +60,4 @@ def channel_columns(names, source: str = "log") -> tuple[str, ...]:
         raise InputError(f"{source}: strain channels must be strain_1 .. strain_K without a gap; "
                          f"{CHANNEL_PREFIX}{missing[0]} is missing")
     return channel_names(len(numbers))
-
-
-def duplicated_columns(path: Path, suffix: str) -> list[str]:
-    """The log columns named more than once in the file's header (pandas would rename the
-    second ``strain`` to ``strain.1`` and read the first alone; Arrow refuses to choose)."""
-    try:
-        if suffix == ".csv":
-            import pandas as pd
-
-            names = [str(n) for n in pd.read_csv(path, header=None, nrows=1, dtype=str).iloc[0]]
-        else:
-            import pyarrow.parquet as pq
-
-            names = pq.read_schema(path).names
-    except Exception:  # noqa: BLE001 - unreadable: the read itself says why, naming the file
-        return []
-    return sorted({n for n in names if (n in LOG_COLUMNS or is_channel(n)) and names.count(n) > 1})
 

@@ -28,6 +28,7 @@ import numpy as np
 
 from rippleb.reading import check_joint_value
 from rippleb.errors import InputError
+from rippleb.log_columns import is_channel
 from rippleb.timebase import TIME_UNITS, looks_like_epoch, to_seconds
 
 #: Joint values a ``[joint]`` table may give (the fields of ``JointSpec`` but ``fs``, which
@@ -131,10 +132,16 @@ def _joint_value(path: Path, key: str, value):
     return kind(check_joint_value(key, value, where))   # the ranges a scenario's [joint] has too
 
 
+def unit_kind(name: str) -> str:
+    """The column whose units ``name`` takes: ``strain`` for a channel ``strain_k``."""
+    return "strain" if is_channel(name) else name
+
+
 def _column(path: Path, name: str, entry) -> Column:
     where = f"{path}: joint.columns.{name}"
-    if name not in COLUMN_UNITS:
-        raise InputError(f"{where}: unknown column; rippleb's columns: {', '.join(COLUMN_UNITS)}")
+    if unit_kind(name) not in COLUMN_UNITS:
+        raise InputError(f"{where}: unknown column; rippleb's columns: {', '.join(COLUMN_UNITS)} "
+                         f"and the strain channels strain_1, strain_2, ...")
     if isinstance(entry, str):
         entry = {"column": entry}
     if not isinstance(entry, dict):
@@ -149,11 +156,12 @@ def _column(path: Path, name: str, entry) -> Column:
         raise InputError(f"{where}: give unit or scale, not both")
     if "scale" in entry:
         return Column(column, "", _scale(where, name, entry["scale"]))
-    unit = entry.get("unit", RIPPLEB_UNITS[name])
-    if unit not in COLUMN_UNITS[name]:
+    kind = unit_kind(name)
+    unit = entry.get("unit", RIPPLEB_UNITS[kind])
+    if unit not in COLUMN_UNITS[kind]:
         raise InputError(f"{where}.unit: {unit!r} is not a unit of {name}; use one of "
-                         f"{', '.join(COLUMN_UNITS[name])}")
-    return Column(column, unit, COLUMN_UNITS[name][unit])
+                         f"{', '.join(COLUMN_UNITS[kind])}")
+    return Column(column, unit, COLUMN_UNITS[kind][unit])
 
 
 def _scale(where: str, name: str, scale) -> float:
@@ -176,6 +184,15 @@ def description_for(log_path: str | Path, given: JointDescription | None) -> Joi
     return base.merged(load_joint(sidecar, sidecar=True)) if sidecar.is_file() else base
 
 
+def with_channels(frame, joint: JointDescription, wanted: tuple[str, ...]) -> tuple[str, ...]:
+    """``wanted`` and the strain channels (``strain_k``) the joint maps or the file holds
+    under rippleb's name (a file column another entry maps is not a channel of its own)."""
+    targets = {column.name for column in joint.columns.values()}
+    found = {name for name in joint.columns if is_channel(name)}
+    found |= {str(c) for c in frame.columns if is_channel(c) and str(c) not in targets}
+    return tuple(wanted) + tuple(sorted(found - set(wanted), key=lambda n: int(n.rpartition("_")[2])))
+
+
 def map_columns(frame, joint: JointDescription, source: str, wanted: tuple[str, ...]) -> tuple[dict, dict]:
     """rippleb's columns from a pandas ``frame``, renamed and in rippleb's units.
 
@@ -190,7 +207,7 @@ def map_columns(frame, joint: JointDescription, source: str, wanted: tuple[str, 
         if mapped is not None and mapped.name not in frame.columns:
             raise InputError(f"{joint.sources[f'columns.{name}']}: joint.columns.{name}: {source} has no "
                              f"column {mapped.name!r} (its columns: {', '.join(map(str, frame.columns))})")
-        column = mapped or Column(name, RIPPLEB_UNITS[name])
+        column = mapped or Column(name, RIPPLEB_UNITS[unit_kind(name)])
         if column.name not in frame.columns:
             continue
         columns[name] = frame[column.name].to_numpy()

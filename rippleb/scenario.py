@@ -28,6 +28,7 @@ import numpy as np
 from rippleb.data import MAX_TORQUE_FACTOR, JointSpec
 from rippleb.reading import check_joint_value
 from rippleb.errors import InputError
+from rippleb.layouts import GAUGE_KEYS, parse_gauges
 from rippleb.mismatch import TABLES as _UNMODELLED_TABLES, parse_tables
 from rippleb.profiles import DEFAULT_RISE, Load, Segment, evaluate_segments  # noqa: F401 (re-exported)
 from rippleb.scenario_types import (DEFAULT_JOINT, DEFAULT_ROBOT, DEFAULT_TEMPERATURE_C,  # noqa: F401 (re-exported)
@@ -42,7 +43,7 @@ _NUMBER = (float, int)
 _TOP_KEYS = {"description": (str,), "scored": (bool,), "duration": _NUMBER,
              "temperature_c": _NUMBER, "evaluation": (dict,), "joint": (dict,),
              "robot": (dict,), "trajectory": (dict,), "load": (list,), "faults": (dict,),
-             "ripple": (dict,), "gear": (dict,), **{table: (dict,) for table in _UNMODELLED_TABLES}}
+             "ripple": (dict,), "gear": (dict,), "gauges": (dict,), **{table: (dict,) for table in _UNMODELLED_TABLES}}
 _RIPPLE_KEYS = {"output_scale": _NUMBER, "hysteresis_nm": _NUMBER, "temperature_coeff": _NUMBER,
                 "drift": _NUMBER}
 _GEAR_KEYS = {"transmission_error": _NUMBER}
@@ -199,6 +200,7 @@ class Parser:
         if not 0.0 <= transmission_error <= MAX_TRANSMISSION_ERROR:
             self.fail("gear.transmission_error", f"must be in [0, {MAX_TRANSMISSION_ERROR:g}] rad peak to "
                       f"peak, got {transmission_error:g}")
+        gauges = parse_gauges(self.table(top.get("gauges", {}), GAUGE_KEYS, "gauges"), self.fail)
         return Scenario(name=self.name, path=self.path,
                         description=top.get("description", "").strip(),
                         spec=spec, duration=duration, scored=top.get("scored", True),
@@ -206,7 +208,7 @@ class Parser:
                         temperature_c=temperature,
                         robot=robot, joint=joint, posture=posture,
                         segments=segments, loads=loads, faults=faults, ripple=ripple,
-                        unmodelled=unmodelled, transmission_error=transmission_error)
+                        unmodelled=unmodelled, transmission_error=transmission_error, gauges=gauges)
 
     def spec(self, raw) -> JointSpec:
         values = self.table(raw, _JOINT_KEYS, "joint")

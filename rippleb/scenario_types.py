@@ -13,6 +13,7 @@ import numpy as np
 
 from rippleb.data import JointSpec
 from rippleb.errors import InputError
+from rippleb.layouts import GaugeSettings
 from rippleb.mismatch import Unmodelled
 from rippleb.profiles import Load, Segment, evaluate_segments
 
@@ -140,6 +141,9 @@ class Scenario:
     transmission_error
         The drive's transmission-error class [rad peak to peak] (``[gear]
         transmission_error``; :mod:`rippleb.simulator.transmission`), 0: an ideal gear.
+    gauges
+        The strain-gauge layout on the flexspline and the size of its installation errors
+        (``[gauges]``; :class:`~rippleb.layouts.GaugeSettings`); the paper's by default.
     """
 
     name: str
@@ -159,6 +163,7 @@ class Scenario:
     ripple: RippleSettings = RippleSettings()
     unmodelled: Unmodelled = Unmodelled()
     transmission_error: float = TRANSMISSION_ERROR_PP
+    gauges: GaugeSettings = GaugeSettings()
 
     def trajectory(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Commanded joint position, velocity, acceleration at times ``t``."""

@@ -13,6 +13,7 @@ from __future__ import annotations
 import itertools
 from pathlib import Path
 
+from rippleb.engine.params import PARAMS
 from rippleb.engine.results import swept_columns
 
 ERROR_COLUMN = "rms_error_nm"
@@ -81,6 +82,10 @@ def _plot(frame, column: str, out_dir: Path) -> Path:
                             ms=3, capsize=3, **kw)
         if column in LOG_SCALE:
             ax.set_xscale("log")
+        choices = PARAMS[column].choices if column in PARAMS else ()
+        if choices:   # a layout: its position in the list, labelled by its name
+            shown = sorted(int(v) for v in table[column].unique())
+            ax.set_xticks(shown, [PARAMS[column].name_of(v) for v in shown], rotation=30, fontsize=7)
         ax.set_yscale("log")
         ax.set_xlabel(column)
         ax.set_title(f"{plot_text(scenario)}, {plot_text(condition)}", fontsize=9)

@@ -55,6 +55,11 @@ MECHANISMS = {
                    "harmonics and leaks into the weights, which then hold it at rest; it runs in the "
                    "wrong frame until the first index pulse after a power cycle, and cannot follow "
                    "orders it does not list or components locked to the output",
+    "gain-tuned": "per-channel gains tuned on the calibration log to null what the gauges' placement "
+                  "leaves at the wave-generator orders: with one bridge there is nothing to tune and it is "
+                  "its inner method (raw); with several channels it cannot tell that ripple from real "
+                  "torque the calibration's reference misses at the same orders, and it holds the "
+                  "calibration's gains through whatever changes the gauges since (re-assembly)",
     "periodic-dob": "a comb over one turn of the encoder angle, any ripple shape, learned on the "
                     "strain minus a low-passed torque: it holds at rest and needs no order list, but "
                     "learns slowly (the load dependence and a changed ripple take many turns), "

@@ -1,14 +1,13 @@
 """``rippleb report``: the comparison of a run, generated from its ``results.csv``.
 
-``rippleb report DIR [--out OUT] [--published] [--html]`` writes ``README.md`` (the
-method x condition summary and headline, then per condition the method x scenario
-matrices as mean and 95 % t-interval over seeds, the timing table, a ranking per scenario
-and the paper's Table I replica; the rows that did not finish ok; provenance), every row
-as ``results.csv``, ``provenance.json``, the figures of :mod:`rippleb.report.figures` and, with
-``--html``, the interactive ``index.html`` of :mod:`rippleb.report.html_report`.
-
-Tables live in :mod:`rippleb.report.tables`, statistics in :mod:`rippleb.report.stats`, provenance in
-:mod:`rippleb.report.provenance`; this module reads the rows and writes the files. The names
+``rippleb report DIR [--out OUT] [--published] [--html]`` writes ``README.md`` (the method x
+condition summary and headline, the gauge layouts of a layout sweep, then per condition the
+method x scenario matrices as mean and 95 % t-interval over seeds, the timing table, a ranking
+per scenario and the paper's Table I replica; the rows that did not finish ok; provenance),
+every row as ``results.csv``, ``provenance.json``, the figures of :mod:`rippleb.report.figures`
+and, with ``--html``, the interactive ``index.html`` of :mod:`rippleb.report.html_report`.
+Tables live in :mod:`rippleb.report.tables`, statistics in :mod:`rippleb.report.stats`, provenance
+in :mod:`rippleb.report.provenance`; this module reads the rows and writes the files. The names
 used by earlier versions of this module are re-exported here.
 """
 
@@ -29,6 +28,7 @@ from rippleb.scoring.metrics import METRIC_COLUMNS
 from rippleb.scoring.truthfree import TRUTH_FREE_COLUMNS
 from rippleb.engine.results import RunWarning, copy_rows, row_key, swept_columns
 from rippleb.engine.sealing import sealed_text
+from rippleb.report.layouts_section import layouts_markdown
 from rippleb.report.tuning_table import tuning_markdown
 from rippleb.report.verdicts import method_verdicts
 from rippleb.report.stats import (CONFIDENCE, METHOD_ORDER, fmt_interval, interval_frame,  # noqa: F401
@@ -103,7 +103,7 @@ def tables_markdown(frame) -> str:
              "that condition; then mean ± 95 % t-interval over seeds.", "",
              condition_summary_markdown(frame), ""]
     parts += [f"- {s}" for s in condition_headline(frame)] + [""]
-    parts += _gear_section(frame)
+    parts += _gear_section(frame) + layouts_markdown(frame)
     verdicts = method_verdicts(frame)
     if verdicts:
         parts += ["### Each method in plain words", "",

@@ -99,12 +99,16 @@ class Session:
         continues the calibration session's (absolute) count.
     realistic
         The unset knobs of :mod:`rippleb.mismatch` take their documented magnitudes.
+    rebonded
+        The gauges' installation errors are drawn anew (``re-assembled``;
+        :mod:`rippleb.simulator.flexspline`).
     """
 
     device: object
     temperature_c: float
     counter_start: int | None = None
     realistic: bool = False
+    rebonded: bool = False
 
 
 def session(device, scenario, condition: str) -> Session:
@@ -130,7 +134,7 @@ def session(device, scenario, condition: str) -> Session:
                        counter_start=start)
     if condition == "aged":
         return dataclasses.replace(same, device=aged(device, scenario.ripple.drift))
-    return dataclasses.replace(same, device=re_assembled(device))
+    return dataclasses.replace(same, device=re_assembled(device), rebonded=True)
 
 
 def aged(device, drift: float = 1.0):

@@ -34,6 +34,10 @@ RIPPLE_TEMP_COEFF = 0.0
 #: the standard class (1 arcmin; the special class is 1.5e-4 rad). Scenario key
 #: ``[gear] transmission_error``; the physics is :mod:`rippleb.simulator.transmission`.
 TRANSMISSION_ERROR_PP = 2.9e-4
+#: Share of that class the twice-per-wave-generator-turn component takes (``[gear]
+#: order2_share``). **Estimate** held to the paper's Fig. 2, docs/physics.md ("Transmission
+#: error"); the previous 0.5 is a sweep value.
+ORDER2_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -140,6 +144,8 @@ class Scenario:
     transmission_error
         The drive's transmission-error class [rad peak to peak] (``[gear]
         transmission_error``; :mod:`rippleb.simulator.transmission`), 0: an ideal gear.
+    order2_share
+        The share of that class the twice-per-turn component takes (``[gear] order2_share``).
     """
 
     name: str
@@ -159,6 +165,7 @@ class Scenario:
     ripple: RippleSettings = RippleSettings()
     unmodelled: Unmodelled = Unmodelled()
     transmission_error: float = TRANSMISSION_ERROR_PP
+    order2_share: float = ORDER2_SHARE
 
     def trajectory(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Commanded joint position, velocity, acceleration at times ``t``."""

@@ -157,7 +157,8 @@ def initial_state(spec: JointSpec, gains: Gains, table: LoadTable, q_d0: float, 
     for _ in range(3):
         tau = float(np.interp(q, table.angle, table.gravity)) + external0
         theta = theta_ref0 - (tau / N - torque_ff0) / gains.kp
-        q = (theta - encoder_zero) / N + float(gear.error(theta, N)) - float(joint.twist(tau))
+        q = ((theta - encoder_zero) / N + float(gear.error(theta, N, tau))
+             - float(gear.compliance_scale(theta)) * float(joint.twist(tau)))
     return np.array([q, qd_d0, theta, N * qd_d0, tau])
 
 

@@ -1,30 +1,39 @@
-"""The gear's transmission (kinematic) error: real torque at the wave generator's orders.
+"""The real torque locked to the wave-generator angle: the gear's transmission (kinematic)
+error, the flexspline's compliance varying over the angle, and the drive's damping.
 
 A harmonic drive does not turn its output by exactly ``theta_m / N``: machining and
 assembly errors of the wave generator, flexspline and circular spline add a position
 error ``e`` that repeats with the wave generator (twice per revolution, the circular
-spline's engagement with the two-lobed flexspline, dominant; once per revolution, the
-wave generator's eccentricity) and with the output (once per output revolution, the
-splines' runout). Tuttle & Seering (1996) and Jia et al. (Mech. Mach. Theory 155, 2021)
-measure and model these components; Ghorbel et al. (J. Mech. Des. 123, 2001) put the
-error inside the drive's kinematics, as here::
+spline's engagement with the two-lobed flexspline; once per revolution, the wave
+generator's eccentricity; four times, the ellipse's second harmonic) and with the output
+(once per output revolution, the splines' runout). Tuttle & Seering (1996) and Jia et al.
+(Mech. Mach. Theory 155, 2021) measure and model these components; Ghorbel et al. (J. Mech.
+Des. 123, 2001) put the error inside the drive's kinematics, as here, and show that the
+drive's flexibility colours it: the error measured under load depends on the load.
+Taghirad & Belanger model the flexspline's compliance as varying with the wave generator's
+position. So::
 
-    twist = theta_m / N + e(theta_m) - q          (the drive's deflection)
-    e(theta) = A2 cos(2 theta + p2) + A1 cos(theta + p1) + Ao cos(theta / N + po)
+    d = theta_m / N + e(theta_m, tau) - q                      (the drive's deflection)
+    tau = twist^-1(d / s(theta_m)) + c d'                      (the shaft torque)
+    e = A2 (1 + l |tau|) cos(2 theta + p2) + A1 cos(theta + p1) + Ao cos(theta / N + po)
+        + A4 cos(4 theta + p4)
+    s = 1 + k cos(2 theta + pc)
 
-so ``e`` reaches the shaft torque, the strain, the motor current and the joint's
-mode through the closed-loop dynamics (:func:`rippleb.simulator.joint.integrate`), and the
-motor feels the torque through the same kinematics, ``tau_s (1/N + e'(theta_m))``
-(virtual work). Chawda & Niemeyer (IROS 2017) identified this spatially periodic
-deflection as the source of vibration in the joint torque of the KUKA LBR iiwa. Neither
-the controller, nor eq. (7)'s ``torque_ref``, nor any method knows it.
+and ``e`` and ``s`` reach the shaft torque, the strain, the motor current and the joint's
+mode through the closed-loop dynamics (:func:`rippleb.simulator.joint.integrate`); the motor
+feels them through the same kinematics, ``tau (1/N + de/dtheta) - s' W*(tau)`` (virtual
+work, ``W*`` the spring's complementary energy). Chawda & Niemeyer (IROS 2017) identified
+this spatially periodic deflection as the source of vibration in the joint torque of the
+KUKA LBR iiwa. Neither the controller, nor eq. (7)'s ``torque_ref``, nor any method knows it.
 
 Magnitudes (``docs/physics.md``, "Transmission error"): the Harmonic Drive CSF catalogue
 rates the positioning accuracy of size 25, ratio >= 50, at 2.9e-4 rad (1 arcmin) peak to
 peak over an output revolution in its standard class, 1.5e-4 rad in its special class.
 That figure bounds the sum of the components; how a drive splits it is an **estimate**
-(below), and each device's error is a random fraction of its class, as real drives sit
-below their rating.
+held to the paper's Fig. 2 (:mod:`rippleb.simulator.spectrum`), and each device's error is a
+random fraction of its class, as real drives sit below their rating. ``A4``, ``l``, ``k``
+and the damping ``c`` are the ``[gear]`` knobs of :mod:`rippleb.mismatch` (off but under
+``realistic``).
 """
 
 from __future__ import annotations
@@ -53,9 +62,11 @@ PARAM_NAMES = ("te2", "te2_phase", "te1", "te1_phase", "te_out", "te_out_phase",
 
 @dataclass(frozen=True)
 class TransmissionError:
-    """One drive's transmission error: amplitudes [rad] and phases [rad] of its three
-    components, ``e(theta) = wg2 cos(2 theta + p2) + wg1 cos(theta + p1) + output
-    cos(theta / N + po)`` with ``theta`` the wave-generator (motor) angle."""
+    """One drive's real torque locked to the wave-generator angle ``theta``: its transmission
+    error ``e(theta, tau) = wg2 (1 + load |tau|) cos(2 theta + p2) + wg1 cos(theta + p1) +
+    output cos(theta / N + po) + wg4 cos(4 theta + p4)`` [rad] and its flexspline's
+    compliance varying at twice the angle, ``s(theta) = 1 + compliance cos(2 theta + pc)``
+    (the drive twists ``s twist(tau)``)."""
 
     wg2: float = 0.0
     wg2_phase: float = 0.0
@@ -106,12 +117,18 @@ class TransmissionError:
                                       self.output, self.output_phase, self.wg4, self.wg4_phase,
                                       self.load, self.compliance, self.compliance_phase)))
 
-    def error(self, wave_angle, gear_ratio: float) -> np.ndarray:
-        """``e`` [rad] at the wave-generator angle ``wave_angle`` [rad] (as the integrator
-        computes it, for tests and figures)."""
+    def error(self, wave_angle, gear_ratio: float, torque=0.0) -> np.ndarray:
+        """``e`` [rad] at the wave-generator angle ``wave_angle`` [rad] under the shaft
+        torque ``torque`` [Nm] (as the integrator computes it, for tests and figures)."""
         th = np.asarray(wave_angle, float)
-        return (self.wg2 * np.cos(2.0 * th + self.wg2_phase) + self.wg1 * np.cos(th + self.wg1_phase)
-                + self.output * np.cos(th / gear_ratio + self.output_phase))
+        wg2 = self.wg2 * (1.0 + self.load * np.abs(torque))
+        return (wg2 * np.cos(2.0 * th + self.wg2_phase) + self.wg1 * np.cos(th + self.wg1_phase)
+                + self.output * np.cos(th / gear_ratio + self.output_phase)
+                + self.wg4 * np.cos(4.0 * th + self.wg4_phase))
+
+    def compliance_scale(self, wave_angle) -> np.ndarray:
+        """``s``: the drive twists ``s twist(tau)`` under ``tau`` at ``wave_angle`` [rad]."""
+        return 1.0 + self.compliance * np.cos(2.0 * np.asarray(wave_angle, float) + self.compliance_phase)
 
 
 #: The ideal gear: no error (the integrator's parameters when none is given).

@@ -35,9 +35,10 @@ RIPPLE_TEMP_COEFF = 0.0
 #: ``[gear] transmission_error``; the physics is :mod:`rippleb.simulator.transmission`.
 TRANSMISSION_ERROR_PP = 2.9e-4
 #: Share of that class the twice-per-wave-generator-turn component takes (``[gear]
-#: order2_share``). **Estimate** held to the paper's Fig. 2, docs/physics.md ("Transmission
-#: error"); the previous 0.5 is a sweep value.
-ORDER2_SHARE = 0.5
+#: order2_share``). **Estimate** held to the paper's Fig. 2 (order 4 the largest line of the
+#: strain at every speed): at the former 0.5 the gear's order-2 torque outgrew the gauges'
+#: order-4 ripple on most devices above 15 rev/s; docs/physics.md, "Transmission error".
+ORDER2_SHARE = 0.25
 
 
 @dataclass(frozen=True)

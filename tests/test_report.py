@@ -308,7 +308,8 @@ def test_report_through_the_cli_on_a_tiny_run(tmp_path, capsys):
     prov = json.loads((pub / "provenance.json").read_text())
     assert prov["seeds"] == [0, 1] and prov["figure_seed"] == 1
     assert prov["run"]["command"] == recorded["command"]
-    for name in ("fig2_order_spectra", "fig4_trajectory", "fig5_ripple_compensation", "fig6_estimates", "error_vs_speed",
+    assert "order 4 the largest line on" in readme   # the population's Fig. 2, re-simulated
+    for name in ("fig2_order_spectra", "fig2_orders_vs_speed", "fig4_trajectory", "fig5_ripple_compensation", "fig6_estimates", "error_vs_speed",
                  "residual_spectra", "accuracy_vs_cost"):
         assert f"figures/{name}.png" in readme
         assert _is_png(pub / "figures" / f"{name}.png")

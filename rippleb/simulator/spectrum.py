@@ -33,7 +33,7 @@ REVOLUTIONS = 2
 #: The direction of motion is the sign of the count's change over this time [s]: long
 #: enough that the loop's count jitter at a stop does not split a run.
 DIRECTION_S = 0.02
-#: The scenarios of the population figure: a speed sweep and the paper's own move.
+#: The scenarios of the population test and figure: a speed sweep and the paper's own move.
 SCENARIOS = ("speed-sweep", "paper-quintic")
 
 
@@ -64,11 +64,6 @@ class OrderWindows:
             if inside.any():
                 out[i] = self.amplitude[inside].mean(axis=0)
         return out
-
-    def __add__(self, other: "OrderWindows") -> "OrderWindows":
-        """The windows of two logs of one joint together."""
-        return OrderWindows(np.concatenate([self.speed, other.speed]),
-                            np.vstack([self.amplitude, other.amplitude]), self.orders)
 
 
 def order_windows(log, orders=ORDERS, revolutions: int = REVOLUTIONS) -> OrderWindows:
@@ -114,18 +109,12 @@ def _amplitudes(values: np.ndarray, theta: np.ndarray, orders) -> np.ndarray:
     return np.hypot(coef[3::2], coef[4::2])
 
 
-def device_bands(seed: int, condition: str = "same-session", scenarios=SCENARIOS,
-                 bands=SPEED_BANDS) -> np.ndarray:
-    """``(len(bands), len(ORDERS))``: the band amplitudes [V] of the device of ``seed``
-    over the windows of ``scenarios`` (names or :class:`~rippleb.scenario.Scenario`,
-    simulated under ``condition``) together."""
+def case_bands(seed: int, scenario, condition: str = "same-session", bands=SPEED_BANDS) -> np.ndarray:
+    """``(len(bands), len(ORDERS))``: the band amplitudes [V] of the device of ``seed`` on
+    ``scenario`` (a name or a :class:`~rippleb.scenario.Scenario`) under ``condition``."""
     from rippleb.simulator.simulation import simulate
 
-    windows = None
-    for name in scenarios:
-        more = order_windows(simulate(name, seed, condition).log)
-        windows = more if windows is None else windows + more
-    return windows.bands(bands)
+    return order_windows(simulate(scenario, seed, condition).log).bands(bands)
 
 
 def largest_order(band_amplitudes: np.ndarray) -> np.ndarray:
@@ -136,10 +125,11 @@ def largest_order(band_amplitudes: np.ndarray) -> np.ndarray:
     return out
 
 
-def order4_fraction(per_device: np.ndarray) -> np.ndarray:
-    """Per band, the fraction of the devices (``(devices, bands, orders)`` amplitudes) whose
-    largest line is order 4, among those with a window in the band (NaN if none has)."""
-    tops = np.array([largest_order(bands) for bands in per_device])
+def order4_fraction(cases: np.ndarray) -> np.ndarray:
+    """Per band, the fraction of the cases (``(cases, bands, orders)`` amplitudes, a case a
+    device on one scenario) whose largest line is order 4, among those with a window in the
+    band (NaN if none has)."""
+    tops = np.array([largest_order(bands) for bands in cases])
     seen = (tops > 0).sum(axis=0)
     with np.errstate(invalid="ignore"):
         return np.where(seen > 0, (tops == 4).sum(axis=0) / np.maximum(seen, 1), np.nan)

@@ -162,7 +162,7 @@ def test_table_one_has_a_row_scored_during_the_motion_beside_the_whole_log():
     assert table.loc["max_motion", "paper_ratio_pct"] == 58.0 and table.loc["rms_motion", "paper_ratio_pct"] == 64.0
     text = report.table_one_markdown(_frame(rows))
     assert "| Error max, during the motion [Nm]" in text and "111 %" in text
-    assert "maximum during the motion error: order tracking is higher than current-based" in text
+    assert "maximum error during the motion: order tracking is higher than current-based" in text
 
 
 def test_table_one_needs_both_methods():

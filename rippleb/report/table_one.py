@@ -118,9 +118,9 @@ def table_one_sentences(table) -> list[str]:
     """Plain-language reading of the replica against the paper, every number from ``table``."""
     cur, order = TABLE_I_METHODS
     out = []
-    names = {"max": "maximum", "rms": "RMS", "max_motion": "maximum during the motion",
-             "rms_motion": "RMS during the motion"}
-    for key, name in names.items():
+    names = {"max": ("maximum", ""), "rms": ("RMS", ""), "max_motion": ("maximum", " during the motion"),
+             "rms_motion": ("RMS", " during the motion")}
+    for key, (name, span) in names.items():
         if key not in table.index:
             continue
         r = table.loc[key]
@@ -136,7 +136,7 @@ def table_one_sentences(table) -> list[str]:
         else:
             judged = "One seed: no interval to compare the paper's ratio with."
         out.append(
-            f"{name} error: order tracking is {better} than current-based ({r[order]:.3g} vs "
+            f"{name} error{span}: order tracking is {better} than current-based ({r[order]:.3g} vs "
             f"{r[cur]:.3g} Nm, ratio {r['ratio_pct']:.0f} %), {agree} ({r[f'paper_{order}']:g} vs "
             f"{r[f'paper_{cur}']:g} Nm, {r['paper_ratio_pct']:g} %). {judged} "
             f"Absolute errors: simulated current-based is {r[cur] / r[f'paper_{cur}']:.2f} x the paper's, "

@@ -27,6 +27,7 @@ import numpy as np
 
 from rippleb.errors import InputError
 from rippleb.files import atomic_path
+from rippleb.reading import LOG_BYTES, check_file, duplicated_columns, read_table
 from rippleb.timebase import check_steps, uniform_rate
 
 SENSOR_COLUMNS = ("t", "strain", "encoder", "current")
@@ -45,8 +46,11 @@ SMALLEST_NORMAL = float(np.finfo(float).tiny)
 #: A torque above this many times the joint's rated torque would break the drive: Harmonic
 #: Drive catalogues rate the momentary peak of size-25 units at 4-7 times the rated torque.
 #: Simulated loads stay below it; a recorded log's estimate beyond it is not scored
-#: (:mod:`rippleb.scorable`).
+#: (:mod:`rippleb.scoring.scorable`).
 MAX_TORQUE_FACTOR = 10.0
+#: Most samples a recorded log may hold: 20 million, 1000 s at 20 kHz, twice the longest
+#: simulated scenario (:data:`rippleb.scenario.MAX_SAMPLES`); more is read no further.
+MAX_LOG_SAMPLES = 20_000_000
 
 
 @dataclass(frozen=True)
@@ -240,23 +244,6 @@ def _holds_booleans(values: np.ndarray) -> bool:
     return values.dtype.kind == "O" and any(isinstance(v, (bool, np.bool_)) for v in values)
 
 
-def _duplicated_columns(path: Path, suffix: str) -> list[str]:
-    """The log columns named more than once in the file's header (pandas would rename the
-    second ``strain`` to ``strain.1`` and read the first alone; Arrow refuses to choose)."""
-    try:
-        if suffix == ".csv":
-            import pandas as pd
-
-            names = [str(n) for n in pd.read_csv(path, header=None, nrows=1, dtype=str).iloc[0]]
-        else:
-            import pyarrow.parquet as pq
-
-            names = pq.read_schema(path).names
-    except Exception:  # noqa: BLE001 - unreadable: the read itself says why, naming the file
-        return []
-    return sorted({n for n in names if n in LOG_COLUMNS and names.count(n) > 1})
-
-
 def read_log(path: str | Path, spec: JointSpec | None = None, *, joint=None,
              resample: bool = False) -> SensorLog:
     """Read a log from CSV or Parquet and check its schema.
@@ -281,25 +268,22 @@ def read_log(path: str | Path, spec: JointSpec | None = None, *, joint=None,
 
     ``meta["joint"]`` lists, per value the log is read with, whether it was given or assumed.
     """
-    import pandas as pd
-
     from rippleb import joint_file
 
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".csv", ".parquet"):
         raise InputError(f"{path}: unsupported log format {suffix or '(none)'!r}; use .csv or .parquet")
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
+    try:   # a regular file of at most LOG_BYTES: not a FIFO (a hang), a device or a giant
+        check_file(path, LOG_BYTES, "log")
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file") from None
     given = joint_file.load_joint(joint) if isinstance(joint, (str, Path)) else joint
     description = joint_file.description_for(path, given)
-    twice = _duplicated_columns(path, suffix)
+    twice = duplicated_columns(path, LOG_COLUMNS)
     if twice:
         raise InputError(f"{path}: column {', '.join(twice)} appears more than once; keep one")
-    try:
-        frame = pd.read_csv(path) if suffix == ".csv" else pd.read_parquet(path)
-    except Exception as exc:  # pandas raises many types for unreadable files
-        raise InputError(f"{path}: cannot read as {suffix[1:]}: {str(exc).splitlines()[0]}") from None
+    frame = read_table(path, MAX_LOG_SAMPLES, "log")
     columns, units = joint_file.map_columns(frame, description, str(path), LOG_COLUMNS)
     if not joint_file.index_wanted(description, columns, str(path)):
         columns.pop("index", None)

@@ -21,12 +21,12 @@ its one file. :func:`describe` says, per value, whether it was given or assumed.
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from rippleb.reading import check_joint_value
 from rippleb.errors import InputError
 from rippleb.timebase import TIME_UNITS, looks_like_epoch, to_seconds
 
@@ -85,15 +85,13 @@ def load_joint(path: str | Path, *, sidecar: bool = False) -> JointDescription:
     A ``--joint`` file holds the ``[joint]`` table alone; a sidecar may hold other tables
     of its own (notes, the bench), which rippleb leaves alone.
     """
+    from rippleb.reading import TOML_BYTES, parse_toml, read_text
+
     path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    try:   # a regular file of at most TOML_BYTES (a FIFO once hung the run), nested a few deep
+        raw = parse_toml(read_text(path, TOML_BYTES, "joint file"), path)
     except FileNotFoundError:
         raise InputError(f"{path}: no such joint file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{path}: not valid TOML: {exc}") from None
     extra = sorted(set(raw) - {"joint"})
     if extra and not sidecar:
         raise InputError(f"{path}: {extra[0]}: unknown key; a joint file holds a [joint] table")
@@ -128,9 +126,9 @@ def _joint_value(path: Path, key: str, value):
         return value
     if isinstance(value, bool) or not isinstance(value, (int, float)) or (kind is int and not isinstance(value, int)):
         raise InputError(f"{where}: must be a {'whole ' if kind is int else ''}number, got {value!r}")
-    if not np.isfinite(value) or value <= 0:
+    if not np.isfinite(value):
         raise InputError(f"{where}: must be positive, got {value!r}")
-    return kind(value)
+    return kind(check_joint_value(key, value, where))   # the ranges a scenario's [joint] has too
 
 
 def _column(path: Path, name: str, entry) -> Column:
@@ -185,6 +183,7 @@ def map_columns(frame, joint: JointDescription, source: str, wanted: tuple[str, 
     whether they were given. A mapped column the file lacks is an :class:`InputError`
     naming the joint file and the entry; an unmapped one is looked up under rippleb's name.
     """
+    _refuse_shared_columns(joint)
     columns, units = {}, {}
     for name in wanted:
         mapped = joint.columns.get(name)
@@ -202,6 +201,18 @@ def map_columns(frame, joint: JointDescription, source: str, wanted: tuple[str, 
     if "t" in columns:
         columns["t"] = _seconds(columns["t"], joint.columns.get("t"), units["t"])
     return columns, units
+
+
+def _refuse_shared_columns(joint: JointDescription) -> None:
+    """One line when two of rippleb's columns are mapped onto one column of the file (the
+    strain read as the current too gave ``ok`` rows of a joint that does not exist)."""
+    seen: dict[str, str] = {}
+    for name, column in joint.columns.items():
+        if column.name in seen:
+            raise InputError(f"{joint.sources[f'columns.{name}']}: joint.columns: {seen[column.name]} and {name} "
+                             f"both map the log's column {column.name!r}; each of rippleb's columns is one of "
+                             f"the log's")
+        seen[column.name] = name
 
 
 def _scaled(values, scale: float):

@@ -21,12 +21,12 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import importlib.resources
-import tomllib
 from pathlib import Path
 
 import numpy as np
 
 from rippleb.data import MAX_TORQUE_FACTOR, JointSpec
+from rippleb.reading import check_joint_value
 from rippleb.errors import InputError
 from rippleb.mismatch import TABLES as _UNMODELLED_TABLES, parse_tables
 from rippleb.profiles import DEFAULT_RISE, Load, Segment, evaluate_segments  # noqa: F401 (re-exported)
@@ -73,8 +73,6 @@ _FAULT_KEYS = {"encoder_missed": _NUMBER, "encoder_spurious_rate": _NUMBER,
 #: Longest log a scenario may ask for, in samples (500 s at 20 kHz; the simulator holds
 #: a few dozen float arrays of this length). Longer would exhaust memory, not simulate.
 MAX_SAMPLES = 10_000_000
-#: Plausible ranges of joint values: beyond them the numbers overflow, not simulate.
-_JOINT_MAX = {"fs": 1.0e6, "gear_ratio": 1000.0, "counts_per_rev": 2**24}
 #: Lubricant temperatures the friction model is meant for [deg C].
 TEMPERATURE_RANGE = (-40.0, 150.0)
 #: An external load above this many times the rated torque would break the drive
@@ -105,12 +103,10 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         One line ``<file>: <key>: <what is wrong>`` for a file that is not TOML, an
         unknown key, a wrong type or an impossible value; or for an unknown name.
     """
+    from rippleb.reading import parse_toml
+
     text, path, name = read_source(name_or_path)
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{path}: not valid TOML: {exc}") from None
-    return Parser(path, name).scenario(raw)
+    return Parser(path, name).scenario(parse_toml(text, path))
 
 
 def scenario_from_dict(raw: dict, name: str = "custom") -> Scenario:
@@ -122,14 +118,14 @@ def scenario_from_dict(raw: dict, name: str = "custom") -> Scenario:
 
 
 def read_source(name_or_path) -> tuple[str, Path, str]:
+    from rippleb.reading import TOML_BYTES, read_text
+
     candidate = Path(name_or_path)
-    if candidate.suffix == ".toml" or candidate.is_file():
-        if not candidate.is_file():
-            raise InputError(f"{candidate}: no such scenario file")
-        try:
-            return candidate.read_text(encoding="utf-8"), candidate, candidate.stem
-        except (OSError, UnicodeDecodeError) as exc:
-            raise InputError(f"{candidate}: cannot read: {exc}") from None
+    if candidate.suffix == ".toml" or candidate.exists():
+        try:   # a regular file of at most TOML_BYTES: not a FIFO, a device or a giant
+            return read_text(candidate, TOML_BYTES, "scenario file"), candidate, candidate.stem
+        except FileNotFoundError:
+            raise InputError(f"{candidate}: no such scenario file") from None
     name = str(name_or_path)
     if not name or any(c in name for c in "/\\") or name.startswith("."):
         # a name is not a path: it must not reach files outside the built-ins
@@ -220,10 +216,7 @@ class Parser:
     def spec(self, raw) -> JointSpec:
         values = self.table(raw, _JOINT_KEYS, "joint")
         for key, value in values.items():
-            if value <= 0:
-                self.fail(f"joint.{key}", f"must be positive, got {value}")
-            if key in _JOINT_MAX and value > _JOINT_MAX[key]:
-                self.fail(f"joint.{key}", f"must be at most {_JOINT_MAX[key]:g}, got {value:g}")
+            check_joint_value(key, value, f"{self.path}: joint.{key}")
         spec = JointSpec(**{k: (v if k == "counts_per_rev" else float(v)) for k, v in values.items()})
         if spec.control_rate > spec.fs:
             self.fail("joint.control_rate", f"{spec.control_rate} exceeds fs {spec.fs}")

@@ -33,7 +33,7 @@ TOP_LEVEL_LAYER = {
     "rippleb.__main__": "api",
     "rippleb.testing": "api",
 }
-SUBPACKAGE_LAYER = {"rippleb.simulator": "simulator", "rippleb.engine": "engine",
+SUBPACKAGE_LAYER = {"rippleb.scoring": "core", "rippleb.simulator": "simulator", "rippleb.engine": "engine",
                     "rippleb.report": "report", "rippleb.cli": "cli"}
 
 

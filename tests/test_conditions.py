@@ -12,12 +12,12 @@ from hypothesis import strategies as st
 from conftest import off_lock
 from rippleb import InputError, simulate
 from rippleb.simulator.conditions import (AGED_AMPLITUDE_SIGMA, AGED_PHASE_SIGMA, AGED_ZERO_SIGMA, CONDITIONS,
-                                POWER_CYCLE_COOLING_K, SAME_JOINT_CONDITIONS, aged, index_count, index_pulses,
-                                re_assembled)
-from rippleb.metrics import Truth, score
+                                          POWER_CYCLE_COOLING_K, SAME_JOINT_CONDITIONS, aged, index_count, index_pulses,
+                                          re_assembled)
+from rippleb.scoring.metrics import Truth, score
 from rippleb.scenario import load_scenario, scenario_from_dict
 from rippleb.simulator import Device
-from rippleb.streaming import prepare_blocks, stream
+from rippleb.harness import prepare_blocks, stream
 
 # sha256 of each column of the logs of the closed-loop flexible joint (docs/physics.md, "Joint
 # dynamics and position controller"), pinned when it replaced the rigid, exactly tracking

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
-from rippleb.metrics import gear_erased
+from rippleb.scoring.metrics import gear_erased
 from rippleb.scenario import load_scenario, scenario_from_dict
 from rippleb.simulator import Device, controller, joint, robot, simulate
 from rippleb.simulator.transmission import TransmissionError, structural_damping

@@ -28,7 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from rippleb.data import SensorLog, make_log
-from rippleb.streaming import InvalidOutput, prepare_blocks, stream
+from rippleb import harness
+from rippleb.harness import InvalidOutput
 
 #: Block lengths compared with one control tick: single samples, an odd length that cuts
 #: ticks, one tick, and one second (20 000 samples at 20 kHz), which holds the whole
@@ -137,18 +138,14 @@ def check_block_size(s: Subject, size: int) -> None:
 
 
 def _fit(cls, params, calibration):
-    method = cls(**params)
-    method.fit(calibration.for_method(keep_ref=True))
-    return method
+    return harness.fit(cls(**params), calibration)
 
 
 def _estimate(fitted, log, block_size, name, copy=True) -> np.ndarray:
     # A deep copy of the fitted method per run: one fit serves every check.
     method = deepcopy(fitted) if copy else fitted
-    visible = log.for_method(keep_ref=False)
-    method.reset(visible.spec)
     try:
-        estimate, _ = stream(method.step, prepare_blocks(visible, block_size), len(visible))
+        estimate, _ = harness.run(method, log, block_size)
     except InvalidOutput as exc:
         raise AssertionError(f"{name}: {exc}" + (f" (blocks of {block_size})" if block_size else "")) from None
     return estimate

@@ -68,7 +68,7 @@ def plot_orders_vs_speed(cases: dict, out_path, devices_text: str, bands=spectru
     ax.set(yscale="log", xlabel="wave-generator speed [rev/s] (band centre)",
            ylabel="strain amplitude [mV] (0.1 V/Nm nominal)",
            title="median over devices, inter-quartile range shaded")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="center right")
     tops = np.array([spectrum.largest_order(b) for b in per_device])
     bottom = np.zeros(len(bands))
     for order in sorted(set(tops.ravel()) - {0}):
@@ -80,7 +80,7 @@ def plot_orders_vs_speed(cases: dict, out_path, devices_text: str, bands=spectru
     bar.set(xticks=np.arange(len(bands)), xticklabels=[band_label(b) for b in bands], ylim=(0, 1),
             xlabel="wave-generator speed [rev/s]", ylabel="share of devices",
             title="which order is the largest line (cases)")
-    bar.legend(fontsize=8)
+    bar.legend(fontsize=8, loc="upper right")
     fig.suptitle(f"Strain re-sampled on the encoder (speed-sweep and paper-quintic, same-session), "
                  f"{devices_text}: the paper's Fig. 2 has order 4 the largest at every speed", fontsize=9)
     fig.tight_layout()

@@ -77,9 +77,9 @@ def ok_rows(frame):
 
 def measured_rows(frame):
     """The rows whose method ran to the end on a log it may be scored on
-    (:data:`rippleb.scorable.MEASURED`: ``ok``, and ``no-reference`` rows of a recording
+    (:data:`rippleb.scoring.scorable.MEASURED`: ``ok``, and ``no-reference`` rows of a recording
     without a reference, still ranked by their truth-free scores)."""
-    from rippleb.scorable import MEASURED
+    from rippleb.scoring.scorable import MEASURED
 
     return frame[frame["status"].isin(MEASURED)]
 

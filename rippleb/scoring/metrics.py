@@ -5,7 +5,7 @@ Notation: ``e[n] = y[n] - tau[n]`` is the estimate ``y`` minus the truth ``tau``
 their count. Each metric is NaN where it is undefined (no truth column, no restart, no
 rest in the window, no distinct correlation peak, no torque step or chirp in the
 scenario). ``docs/metrics.md`` repeats these formulas. The two columns of the dynamic
-response, ``step_latency_ms`` and ``bandwidth_hz``, are computed in :mod:`rippleb.response`.
+response, ``step_latency_ms`` and ``bandwidth_hz``, are computed in :mod:`rippleb.scoring.response`.
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ import numpy as np
 from scipy.fft import next_fast_len
 
 from rippleb.data import MAX_TORQUE_FACTOR
-from rippleb.response import (BAND_FRACTION, BAND_MIN_BINS, BAND_STEP, HALF_POWER,  # noqa: F401 - re-exported
-                              STEP_BASELINE_S, STEP_HORIZON_S, STEP_MAX_RISE_S, bandwidth_hz, step_latency_ms)
+from rippleb.scoring.response import (BAND_FRACTION, BAND_MIN_BINS, BAND_STEP, HALF_POWER,  # noqa: F401 - re-exported
+                                      STEP_BASELINE_S, STEP_HORIZON_S, STEP_MAX_RISE_S, bandwidth_hz, step_latency_ms)
 
 MAX_DELAY_S = 0.100
 RESTART_ANGLE_RAD = 4.0 * np.pi   # two wave-generator revolutions
@@ -43,8 +43,8 @@ class Truth:
     ``steps`` rows ``(start, rise, change)`` [s, s, Nm] of the step loads' edges,
     ``chirps`` rows ``(start, stop, f0, f1)`` [s, s, Hz, Hz] of the chirp loads.
     ``torque_limit`` [Nm], recorded logs only: the largest torque the joint can carry; a row
-    whose estimate goes beyond it is not scored (:mod:`rippleb.scorable`).
-    What the method itself saw, for the truth-free columns (:mod:`rippleb.truthfree`):
+    whose estimate goes beyond it is not scored (:mod:`rippleb.scoring.scorable`).
+    What the method itself saw, for the truth-free columns (:mod:`rippleb.scoring.truthfree`):
     ``strain`` [V] and ``encoder_angle`` [rad], the wave-generator angle from the encoder
     counts (on a simulated log ``wave_angle`` is the true angle, not the encoder's); None
     on a truth built without them.

@@ -33,7 +33,7 @@ from rippleb.mismatch import TABLES as _UNMODELLED_TABLES, parse_tables
 from rippleb.profiles import DEFAULT_RISE, Load, Segment, evaluate_segments  # noqa: F401 (re-exported)
 from rippleb.scenario_types import (DEFAULT_JOINT, DEFAULT_ROBOT, DEFAULT_TEMPERATURE_C,  # noqa: F401 (re-exported)
                                     HYSTERESIS_NM, REFERENCE_TEMPERATURE_C, RIPPLE_TEMP_COEFF, Faults,
-                                    TRANSMISSION_ERROR_PP, RippleSettings, Scenario)
+                                    ORDER2_SHARE, TRANSMISSION_ERROR_PP, RippleSettings, Scenario)
 
 CALIBRATION = "calibration"
 SEGMENT_KINDS = ("hold", "move", "ramp", "cruise")
@@ -46,7 +46,8 @@ _TOP_KEYS = {"description": (str,), "scored": (bool,), "duration": _NUMBER,
              "ripple": (dict,), "gear": (dict,), "gauges": (dict,), **{table: (dict,) for table in _UNMODELLED_TABLES}}
 _RIPPLE_KEYS = {"output_scale": _NUMBER, "hysteresis_nm": _NUMBER, "temperature_coeff": _NUMBER,
                 "drift": _NUMBER}
-_GEAR_KEYS = {"transmission_error": _NUMBER}
+#: The [gear] keys that act in every condition; the table's knobs are :mod:`rippleb.mismatch`'s.
+_GEAR_KEYS = {"transmission_error": _NUMBER, "order2_share": _NUMBER}
 #: Largest transmission-error class accepted [rad peak to peak]: 3.4 arcmin, above every
 #: class of the CSF catalogue (1 arcmin standard).
 MAX_TRANSMISSION_ERROR = 1e-3
@@ -193,13 +194,16 @@ class Parser:
             self.fail("ripple.temperature_coeff", f"{ripple.temperature_coeff:g} per K would turn the "
                       f"ripple negative at {temperature:g} degC")
         for table, keys in _UNMODELLED_TABLES.items():
-            self.table(top.get(table, {}), keys, table)
+            self.table(top.get(table, {}), {**keys, **(_GEAR_KEYS if table == "gear" else {})}, table)
         unmodelled = parse_tables(top, self.fail, spec)
-        gear = self.table(top.get("gear", {}), _GEAR_KEYS, "gear")
+        gear = top.get("gear", {})
         transmission_error = float(gear.get("transmission_error", TRANSMISSION_ERROR_PP))
         if not 0.0 <= transmission_error <= MAX_TRANSMISSION_ERROR:
             self.fail("gear.transmission_error", f"must be in [0, {MAX_TRANSMISSION_ERROR:g}] rad peak to "
                       f"peak, got {transmission_error:g}")
+        order2_share = float(gear.get("order2_share", ORDER2_SHARE))
+        if not 0.0 <= order2_share <= 1.0:
+            self.fail("gear.order2_share", f"must be in [0, 1] (of the class), got {order2_share:g}")
         gauges = parse_gauges(self.table(top.get("gauges", {}), GAUGE_KEYS, "gauges"), self.fail)
         return Scenario(name=self.name, path=self.path,
                         description=top.get("description", "").strip(),
@@ -208,7 +212,8 @@ class Parser:
                         temperature_c=temperature,
                         robot=robot, joint=joint, posture=posture,
                         segments=segments, loads=loads, faults=faults, ripple=ripple,
-                        unmodelled=unmodelled, transmission_error=transmission_error, gauges=gauges)
+                        unmodelled=unmodelled, transmission_error=transmission_error,
+                        order2_share=order2_share, gauges=gauges)
 
     def spec(self, raw) -> JointSpec:
         values = self.table(raw, _JOINT_KEYS, "joint")

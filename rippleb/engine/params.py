@@ -82,6 +82,9 @@ PARAMS = {p.name: p for p in (
     Param("gear.transmission_error", float, 0.0, 5.8e-4,
           "the drive's transmission-error class [rad peak to peak] (default 2.9e-4, the CSF "
           "catalogue's standard class; 0: an ideal gear)"),
+    Param("gear.order2_share", float, 0.0, 1.0,
+          "share of the transmission-error class taken by its twice-per-turn component (default "
+          "0.25, held to the paper's Fig. 2; up to 0.5 the worst-case sum stays inside the class)"),
     Param("ripple.drift", float, 0.0, 5.0,
           "drift of ripple and bridge zero since calibration, x the documented estimate "
           "(default 1); acts under --conditions aged only", device=False),
@@ -104,6 +107,7 @@ UNMODELLED_RANGES = {
     "thermal.warmup_rate": (0.0, 10.0), "daq.adc_bits": (8, 24), "daq.antialias_hz": (0.0, 20_000.0),
     "daq.pwm_mv": (0.0, 100.0), "daq.pwm_hz": (4000.0, 100_000.0), "encoder.edge_error": (0.0, 30.0),
     "encoder.eccentricity": (0.0, 5.0), "encoder.missed": (0.0, 1.0e-3),
-    "controller.bandwidth_factor": (0.5, 3.0),
+    "controller.bandwidth_factor": (0.5, 3.0), "gear.compliance_variation": (0.0, 0.2),
+    "gear.order4_error": (0.0, 1.0), "gear.load_error": (0.0, 2.0), "gear.loss_factor": (0.0, 0.3),
 }
 PARAMS.update({k.name: Param(k.name, k.kind, *UNMODELLED_RANGES[k.name], k.doc) for k in _KNOBS})

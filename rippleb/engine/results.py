@@ -29,7 +29,7 @@ from rippleb.simulator.conditions import DEFAULT_CONDITION
 from rippleb import integrity
 from rippleb.errors import InputError, RunWarning  # noqa: F401 - RunWarning: re-exported
 from rippleb.files import atomic_path, open_appending
-from rippleb.scoring.metrics import METRIC_COLUMNS
+from rippleb.scoring.metrics import LATER_COLUMNS, METRIC_COLUMNS
 from rippleb.printable import csv_read, csv_text, escaped
 from rippleb.scoring.scorable import MEASURED, NO_REFERENCE  # noqa: F401 - MEASURED re-exported
 from rippleb.scoring.truthfree import TRUTH_FREE_COLUMNS
@@ -261,7 +261,7 @@ def read_rows(path: Path) -> list[dict]:
     if not lines:
         raise InputError(f"{path}: empty file, not a rippleb results file")
     header, body = lines[0], lines[1:]
-    required = ("method", "scenario", "seed", "status") + METRIC_COLUMNS
+    required = ("method", "scenario", "seed", "status") + tuple(c for c in METRIC_COLUMNS if c not in LATER_COLUMNS)
     missing = [c for c in required if c not in header]
     if missing:
         raise InputError(f"{path}: not a rippleb results file (missing column(s) {', '.join(missing)})")

@@ -241,6 +241,8 @@ def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
     from rippleb.simulator.conditions import DEFAULT_CONDITION
     from rippleb.report.provenance import seeds_text
     from rippleb.engine.results import swept_columns
+    from rippleb.report import order_figure
+    from rippleb.report.tables import is_recorded
     from rippleb.report.stats import measured_rows, method_order, with_condition
 
     if fmt not in FORMATS:
@@ -253,6 +255,14 @@ def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
     figures, warnings = {}, []
     figures["fig2_order_spectra"] = (plot_order_spectra(path("fig2_order_spectra"), seed=seed),
                                      f"Strain spectra over time and over angle (Fig. 2 replica, seed {seed})")
+    if not is_recorded(frame):   # simulated devices: the run's own, re-simulated
+        population_seeds = sorted(int(k) for k in (frame["seed"].unique() if speed_seeds is None else speed_seeds))
+        devices = seeds_text(population_seeds).replace("(", "devices (")
+        cases = order_figure.population(population_seeds)
+        figures["fig2_orders_vs_speed"] = (
+            order_figure.plot_orders_vs_speed(cases, path("fig2_orders_vs_speed"), devices),
+            f"Strain order amplitudes against wave-generator speed over {devices} (Fig. 2 over the "
+            f"population): {order_figure.fraction_sentence(cases)}")
     frame = with_condition(frame)
     # a recording without a reference (no-reference rows) is still drawn by its truth-free column
     ok = measured_rows(frame)

@@ -33,7 +33,8 @@ CONDITIONS = {
     "re-assembled": "flexspline re-mounted or drive swapped: gauge errors (ripple, gain) redrawn",
     "realistic": "same session, but the joint has the physics no method models (gauge dynamics, "
                  "non-affine, flank- and load-history-dependent ripple, ripple at orders no method "
-                 "models, span drift, DAQ chain, encoder errors; today's position loop), in its "
+                 "models, span drift, DAQ chain, encoder errors, the gear's angle-locked torque beyond "
+                 "its error; today's position loop), in its "
                  "calibration log too",
 }
 DEFAULT_CONDITION = "same-session"

@@ -38,7 +38,7 @@ from rippleb.simulator.flexspline import channel_devices
 from rippleb.simulator.encoder import EncoderErrors, counts, missed_counts
 from rippleb.simulator.joint import load_table
 from rippleb.simulator.sensors import current_sense, dropouts, encoder_faults, gauge_channels
-from rippleb.simulator.transmission import IDEAL as IDEAL_GEAR, TransmissionError
+from rippleb.simulator.transmission import IDEAL as IDEAL_GEAR, TransmissionError, structural_damping
 
 
 @dataclass(frozen=True, eq=False)
@@ -116,11 +116,14 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     knobs = sc.unmodelled.resolve(realistic=session.realistic)
     errors = EncoderErrors.draw(seed, knobs, spec.counts_per_rev)
     gains = controller.design_gains(spec, float(np.mean(nominal.inertia)), knobs.bandwidth_factor)
-    gear = TransmissionError.draw(seed, sc.transmission_error)
+    gear = TransmissionError.draw(seed, sc.transmission_error, sc.order2_share, order4=knobs.order4_error,
+                                  load=knobs.load_error, compliance=knobs.compliance_variation,
+                                  rated_torque=spec.rated_torque)
     table = load_table(sc, q_d)
     loop = (spec, device, sc.temperature_c, table, gains, t, trajectory, tau_ref - _excitation(sc, t),
             sc.external_torque(t))
-    q, qd, theta_m, _, tau_true, commanded = controller.run(*loop, encoder=errors, gear=gear)
+    drive = dict(encoder=errors, damping=structural_damping(knobs.loss_factor, table))
+    q, qd, theta_m, _, tau_true, commanded = controller.run(*loop, gear=gear, **drive)
     # What the gear's error adds to the real torque (the metrics' "erased" columns; never
     # streamed to a method): this joint against the same joint with an ideal gear, each
     # under its own loop (docs/metrics.md, "What a method erased", says what else the
@@ -130,7 +133,7 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     if not sc.scored:
         torque_gear = None
     elif gear.active:
-        torque_gear = tau_true - controller.run(*loop, encoder=errors)[4]
+        torque_gear = tau_true - controller.run(*loop, **drive)[4]
     else:
         torque_gear = np.zeros(n)
 

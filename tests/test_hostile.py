@@ -106,7 +106,8 @@ def test_escape_sequences_reach_neither_terminal_nor_files(finished, tmp_path):
     written = [(tmp_path / "rep" / "README.md").read_text(), (where / "run" / "results.csv").read_text()]
     for text in [first.stdout, first.stderr, report.stdout, report.stderr, *written]:
         assert "\x1b" not in text and "\x07" not in text and "\x9b" not in text
-    assert "\\x1b[2J" in written[0]
+    # spelled out, and Markdown-escaped so that it renders as written: \x1b[2J
+    assert r"\\x1b\[2J" in written[0]
     assert float(rows["raw"]["rms_error_nm"]) > 0 and rows["raw"]["status"] == "ok"
 
 
@@ -147,8 +148,8 @@ def test_no_write_follows_a_symbolic_link_in_the_run_directory(finished, tmp_pat
     resumed = _cli(tmp_path, site, "run", "--resume", run, "--no-progress")
     assert resumed.returncode == 2
     assert resumed.stderr.strip().splitlines() == [
-        f"rippleb: error: {target}: a symbolic link, which rippleb never makes in a run directory; rippleb "
-        "does not write through it: remove it, or choose another --out"]
+        f"rippleb: error: {target}: a symbolic link, which rippleb never makes in a run or report directory; "
+        "rippleb does not write through it: remove it, or choose another --out"]
     assert sorted(p.name for p in victim.iterdir()) == ["precious.txt"]
     assert (victim / "precious.txt").read_text() == "precious\n"
 

@@ -51,7 +51,7 @@ def test_lowpass_bandwidth_is_its_cutoff(calibration, cutoff):
     # (the step's faster parts pass with less delay, and the ripple on the true torque's
     # 10 ms rise moves the crossing by a few ms either way, as for raw, whose crossing the
     # test above allows 5 ms: measured 23.1 ms at 10 Hz, 1.03 x the delay, with the gauges
-    # on the flexspline and the gear's WG-locked torque; 0.93 x before them)
+    # on the flexspline and the gear's WG-locked torque, below 1 x before them)
     latency = _row("lowpass", "load-steps", calibration, cutoff_hz=cutoff)["step_latency_ms"]
     delay = 1000 * np.sqrt(2) / (2 * np.pi * cutoff)
     assert 0.5 * delay < latency < delay + 5.0

@@ -40,6 +40,10 @@ COLUMNS = (KEY_COLUMNS + ("status",) + METRIC_COLUMNS + TRUTH_FREE_COLUMNS
            + ("message", "n_samples", "fit_s", "wall_s", "calibration", "params", "scenario_sha256",
               "rippleb_version", "python", "numpy", "platform", "cpu", "numerics", "run_id"))
 NUMERIC_COLUMNS = METRIC_COLUMNS + TRUTH_FREE_COLUMNS + ("n_samples", "fit_s", "wall_s")
+#: Metric columns that came later than the file format: a results file without them still
+#: reads (as n/a). ``gear_removed_fraction`` replaced ``gear_erased_fraction`` (issue 38),
+#: which an older file holds instead and which is read as an extra column.
+LATER_COLUMNS = ("gear_removed_fraction",)
 STATUSES = ("ok", "error", "invalid", "timeout", NO_REFERENCE)
 #: An ``ok`` row holds at least one of these: an error against a reference, or, on a log
 #: with none, a truth-free score.
@@ -247,7 +251,8 @@ def read_rows(path: Path) -> list[dict]:
     if not lines:
         raise InputError(f"{path}: empty file, not a rippleb results file")
     header, body = lines[0], lines[1:]
-    required = ("method", "scenario", "seed", "status") + METRIC_COLUMNS
+    required = ("method", "scenario", "seed", "status") + tuple(c for c in METRIC_COLUMNS
+                                                                if c not in LATER_COLUMNS)
     missing = [c for c in required if c not in header]
     if missing:
         raise InputError(f"{path}: not a rippleb results file (missing column(s) {', '.join(missing)})")

@@ -57,6 +57,19 @@ def smooth(x: np.ndarray, n: int) -> np.ndarray:
     return np.convolve(x, kernel, "same") / np.convolve(np.ones_like(x), kernel, "same")
 
 
+def fit_beside(rows: np.ndarray, gear: np.ndarray, target: np.ndarray):
+    """Least squares of ``target`` on the map's ``rows`` and the ``gear`` rows together.
+
+    Returns the map's coefficients, the gear's (the calibration's gear torque, which the
+    estimate keeps) and the RMS residual [Nm]. The columns have very different scales (Nm
+    against rad/s^2), so the problem is solved on unit columns."""
+    design = np.hstack([rows, gear])
+    scale = np.maximum(np.linalg.norm(design, axis=0), 1e-300)
+    coef, *_ = np.linalg.lstsq(design / scale, target, rcond=None)
+    coef = coef / scale
+    return coef[:rows.shape[1]], coef[rows.shape[1]:], float(np.std(target - design @ coef))
+
+
 class GearAware(AngleAdaptiveFrozen):
     """``angle-adaptive-frozen`` whose calibration map is fitted beside a model of the gear's
     real torque, which the estimate then keeps (see the module).
@@ -102,12 +115,5 @@ class GearAware(AngleAdaptiveFrozen):
         angle = enc.mean(axis=1) * 2.0 * np.pi / spec.counts_per_rev
         speed = smooth(np.gradient(angle, tick_s), self.speed_ticks)
         accel = smooth(np.gradient(speed, tick_s), self.speed_ticks)
-        rows = map_rows(phi, y)
-        design = np.hstack([rows, gear_rows(angle, speed, accel, self.gear_orders)])
-        # columns of very different scales (Nm against rad/s^2): solve on unit columns
-        scale = np.maximum(np.linalg.norm(design, axis=0), 1e-300)
-        coef, *_ = np.linalg.lstsq(design / scale, y - tau, rcond=None)
-        coef = coef / scale
-        self.map_ = coef[:rows.shape[1]]
-        self.gear_coef_ = coef[rows.shape[1]:]
-        self.residual_rms_ = float(np.std(y - tau - design @ coef))
+        self.map_, self.gear_coef_, self.residual_rms_ = fit_beside(
+            map_rows(phi, y), gear_rows(angle, speed, accel, self.gear_orders), y - tau)

@@ -26,7 +26,11 @@ RESTART_ANGLE_RAD = 4.0 * np.pi   # two wave-generator revolutions
 REST_HOLD_S = 0.010               # recorded logs: no encoder count for 10 ms is "at rest"
 DELAY_PEAK_FACTOR = 2.0           # delay_ms: lags whose misfit 1 - r is within 2x the best ...
 DELAY_PEAK_WIDTH_S = 0.025        # ... must all lie within 25 ms of it, else the peak is not distinct
-GEAR_TORQUE_FLOOR_NM = 1e-6      # gear_removed_fraction: below this RMS there is nothing to remove
+#: gear_removed_fraction is NaN where the gear's torque is below this RMS [Nm]: the ripple a
+#: method removes at orders 1 and 2 (0.1-1 Nm) projects onto g by its ratio to g, and on
+#: creep and static-contact (g 0.009-0.044 Nm RMS on devices 2000-2009) moved the share
+#: of the angle-map methods by up to +-5; the moving scenarios carry 0.22-0.84 Nm.
+GEAR_TORQUE_FLOOR_NM = 0.1
 
 _MEMO: dict[int, dict] = {}       # id of a live Truth -> what Truth.remembered computed for it
 
@@ -156,7 +160,8 @@ def gear_removed(estimate: np.ndarray, strain: np.ndarray | None, gear: np.ndarr
     small oscillations) is not the method's doing and is not counted. It may leave [0, 1]:
     ripple a method removes at orders 1 and 2 is locked to the angle ``g`` is locked to,
     so it projects onto ``g`` with the sign of the device's ripple phase (docs/metrics.md,
-    "What a method erased", measures both). NaN without a gear torque (ideal gear,
+    "What a method erased", measures both). NaN where the gear torque is below
+    :data:`GEAR_TORQUE_FLOOR_NM` RMS (an ideal gear, a joint that barely turns, a
     recording) or without the strain. ``memo``, the :class:`Truth` that holds ``strain``,
     ``gear`` and ``mask``, keeps their side for the next estimate.
     """

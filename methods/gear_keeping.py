@@ -84,7 +84,7 @@ def gear_columns(phi: np.ndarray, orders, gear_orders, speed: np.ndarray, accel:
         c, s = phi[:, 2 * i], phi[:, 2 * i + 1]
         w2 = speed ** 2
         cols += [w2 * c, w2 * s, accel * c, accel * s, load * w2 * c, load * w2 * s]
-    return np.column_stack(cols)
+    return np.column_stack(cols) if cols else np.zeros((len(speed), 0))
 
 
 class GearKeeping(AngleAdaptive):

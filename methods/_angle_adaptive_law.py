@@ -170,24 +170,25 @@ def track_speed(speed, end, counts_per_rev):
 
 
 #: Gear-model coefficients per gear order, in :func:`gear_torque`'s order.
-GEAR_TERMS = 6
+GEAR_TERMS = 8
 
 
 @compiled(types.float64(IN_F8, IN_I8, F8_C, F8, types.float64))
 def gear_torque(gear, gear_index, phi, speed, load):
     """The gear model's torque [Nm] over one tick: per gear order ``k`` (at position
     ``gear_index`` of the map's orders, whose tick-mean ``cos k theta``, ``sin k theta``
-    are in ``phi``), ``[w^2 cos, w^2 sin, a cos, a sin, y w^2 cos, y w^2 sin]`` times its
-    :data:`GEAR_TERMS` coefficients in ``gear``; ``w``, ``a`` the tracked speed and
-    acceleration (``speed``), ``y`` the tick's ``load`` [Nm]. Zero at rest, whatever the
-    coefficients."""
-    w2, acc = speed[SPEED_W] * speed[SPEED_W], speed[SPEED_A]
+    are in ``phi``), ``[w cos, w sin, w^2 cos, w^2 sin, a cos, a sin, y w^2 cos,
+    y w^2 sin]`` times its :data:`GEAR_TERMS` coefficients in ``gear``; ``w``, ``a`` the
+    tracked speed and acceleration (``speed``), ``y`` the tick's ``load`` [Nm]. Zero at
+    rest, whatever the coefficients."""
+    w, acc = speed[SPEED_W], speed[SPEED_A]
+    w2 = w * w
     total = 0.0
     for g in range(len(gear_index)):
         c, sn = phi[2 * gear_index[g]], phi[2 * gear_index[g] + 1]
         k = GEAR_TERMS * g
-        total += (w2 * (gear[k] * c + gear[k + 1] * sn) + acc * (gear[k + 2] * c + gear[k + 3] * sn)
-                  + load * w2 * (gear[k + 4] * c + gear[k + 5] * sn))
+        total += (w * (gear[k] * c + gear[k + 1] * sn) + w2 * (gear[k + 2] * c + gear[k + 3] * sn)
+                  + acc * (gear[k + 4] * c + gear[k + 5] * sn) + load * w2 * (gear[k + 6] * c + gear[k + 7] * sn))
     return total
 
 

@@ -58,6 +58,10 @@ from rippleb.methods._angle_adaptive_law import (GEAR_TERMS, LAW_MAX_COUNTS, SPE
 from rippleb.methods.angle_adaptive import AngleAdaptive, map_rows
 from rippleb.methods.gear_aware import fit_beside
 
+#: The gear models: dynamic (speed, speed squared and acceleration terms per gear order:
+#: the error's rate and its second derivative), the same with load-proportional ``y w^2``
+#: terms, or none (``angle-adaptive``'s learning with the speed gate alone).
+GEAR_MODELS = ("dynamic", "dynamic+load", "none")
 #: Share of the calibration's moving ticks turned at most as fast as the speed the gear
 #: model is taken to cover: the 99th percentile of the counts per tick, so that a few ticks
 #: of a jolt do not set it.
@@ -83,7 +87,7 @@ def gear_columns(phi: np.ndarray, orders, gear_orders, speed: np.ndarray, accel:
         i = list(orders).index(k)
         c, s = phi[:, 2 * i], phi[:, 2 * i + 1]
         w2 = speed ** 2
-        cols += [w2 * c, w2 * s, accel * c, accel * s, load * w2 * c, load * w2 * s]
+        cols += [speed * c, speed * s, w2 * c, w2 * s, accel * c, accel * s, load * w2 * c, load * w2 * s]
     return np.column_stack(cols) if cols else np.zeros((len(speed), 0))
 
 
@@ -111,12 +115,19 @@ class GearKeeping(AngleAdaptive):
         top speed (the 99th percentile of its counts per tick): 1.0, the speeds where the
         gear model was identified. Not tuned: the tuning protocol scores on calibration
         logs, which never turn faster than themselves.
+    gear_model
+        ``"dynamic"`` (default): per gear order ``[w cos, w sin, w^2 cos, w^2 sin, a cos,
+        a sin]``, the terms of a damping ``c e'`` and of ``M e''``. ``"dynamic+load"`` adds ``[y w^2 cos, y w^2 sin]``, for a drive
+        whose error grows with its load (a compliance that varies with the angle): on the
+        built-in joints, whose error does not, those terms cost the calibration map 0.06 Nm
+        (docs/methods/gear-keeping.md). ``"none"``: no model, the speed gate alone (the
+        ablation).
     """
 
     name = "gear-keeping"
     description = ("angle-adaptive whose map is learned beside an encoder model of the gear's dynamic torque "
-                   "(orders 1, 2; which the estimate keeps), and only up to the calibration's top speed "
-                   "(speed_cover=1.0); held above it (memory_revs=139.0)")
+                   "(gear_model=dynamic, orders 1 and 2; the estimate keeps it), and only up to the "
+                   "calibration's top speed (speed_cover=1.0); held above it (memory_revs=139.0)")
     #: the online law's ranges, as angle-adaptive's (rippleb/tuning.py)
     tunable = {"memory_revs": (3.0, 300.0, "log"), "prior_sd_nm": (0.03, 3.0, "log"),
                "min_counts": (1, 5, "int")}
@@ -125,21 +136,24 @@ class GearKeeping(AngleAdaptive):
                  prior_sd_nm: float = 0.0446, floor_sd_nm: float = 1.0, min_counts: int = 2,
                  update_ticks: int = 10, outlier_gate: float = 4.0, max_jolt_counts: int = 2,
                  adapt: bool = True, gear_orders: tuple = (1, 2), speed_gain: float = 0.2,
-                 speed_cover: float = 1.0, gear_load: bool = False):
+                 speed_cover: float = 1.0, gear_model: str = "dynamic"):
         super().__init__(orders=orders, memory_revs=memory_revs, prior_sd_nm=prior_sd_nm,
                          floor_sd_nm=floor_sd_nm, min_counts=min_counts, update_ticks=update_ticks,
                          outlier_gate=outlier_gate, max_jolt_counts=max_jolt_counts, adapt=adapt)
         self.gear_orders = gear_orders
         self.speed_gain = speed_gain
         self.speed_cover = speed_cover
-        self.gear_load = gear_load
+        self.gear_model = gear_model
 
     def fit(self, calibration: SensorLog) -> None:
         """``angle-adaptive``'s fit (gain, offset, home, noise level), then the map again by
         least squares of ``y - torque_ref`` on the map's rows beside the gear model's
         (``gear_coef_``, kept out of the map), and the top speed it covers (``cover_counts_``,
         counts per tick)."""
-        missing = [k for k in self.gear_orders if k not in self.orders]
+        if self.gear_model not in GEAR_MODELS:
+            raise ValueError(f"{self.name}: gear_model must be one of {', '.join(GEAR_MODELS)}, "
+                             f"got {self.gear_model!r}")
+        missing = [k for k in self._gear_orders() if k not in self.orders]
         if missing:
             raise ValueError(f"{self.name}: gear_orders {missing} are not among orders {self.orders}")
         super().fit(calibration)
@@ -149,16 +163,20 @@ class GearKeeping(AngleAdaptive):
         ends = np.ascontiguousarray(enc[:, -1], dtype=np.int64)
         speed, accel = np.empty(len(ends)), np.empty(len(ends))
         tracked_speeds(ends, self._speed_state(spec), int(spec.counts_per_rev), speed, accel)
-        gear = gear_columns(phi, self.orders, self.gear_orders, speed, accel, y)
+        gear = gear_columns(phi, self.orders, self._gear_orders(), speed, accel, y)
         keep = np.ones(gear.shape[1], bool)
-        if not self.gear_load:
-            keep[4::GEAR_TERMS] = keep[5::GEAR_TERMS] = False
+        if self.gear_model != "dynamic+load":
+            keep[6::GEAR_TERMS] = keep[7::GEAR_TERMS] = False
         self.map_, coef, self.residual_rms_ = fit_beside(map_rows(phi, y), gear[:, keep], y - tau)
         self.gear_coef_ = np.zeros(gear.shape[1])
         self.gear_coef_[keep] = coef
         steps = np.abs(np.diff(ends))
         moving = steps[steps >= max(int(self.min_counts), 1)]
         self.cover_counts_ = float(np.percentile(moving, COVER_QUANTILE)) if len(moving) else 0.0
+
+    def _gear_orders(self) -> tuple:
+        """The orders the gear model has terms at: none with ``gear_model="none"``."""
+        return () if self.gear_model == "none" else tuple(self.gear_orders)
 
     def _speed_state(self, spec: JointSpec) -> np.ndarray:
         """A fresh speed-tracking state (positions ``SPEED_*`` of the law)."""
@@ -172,5 +190,5 @@ class GearKeeping(AngleAdaptive):
         super().reset(spec)
         self.law_[LAW_MAX_COUNTS] = float(self.speed_cover) * self.cover_counts_
         self.gear_ = np.asarray(self.gear_coef_, float)
-        self.gear_index_ = np.array([list(self.orders).index(k) for k in self.gear_orders], dtype=np.int64)
+        self.gear_index_ = np.array([list(self.orders).index(k) for k in self._gear_orders()], dtype=np.int64)
         self.speed_ = self._speed_state(spec)

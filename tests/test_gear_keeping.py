@@ -123,3 +123,31 @@ def test_gear_orders_outside_the_map_are_refused():
 
 def test_gear_keeping_passes_the_conformance_kit():
     check_method(GearKeeping)
+
+
+def test_the_paired_table_pairs_devices_and_skips_cases_without_gear_torque():
+    """benchmarks/gear_keeping_table.py (docs/methods/gear-keeping.md's tables) on rows made
+    up for the purpose: the difference is per device, over the scenarios; the removed share
+    only where the gear torque reaches 0.1 Nm RMS."""
+    import importlib.util
+    from pathlib import Path
+
+    import pandas as pd
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "gear_keeping_table.py"
+    spec = importlib.util.spec_from_file_location("gear_keeping_table", path)
+    table_module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(table_module)
+    rows = []
+    for seed in range(4):
+        for scenario, gear in (("a", 0.5), ("b", 0.01)):
+            for method, rms, removed in (("gear-keeping", 1.0, 0.1), ("other", 1.0 + 0.1 * (seed + 1), 0.3)):
+                rows.append(dict(method=method, scenario=scenario, condition="same-session", seed=seed,
+                                 status="ok", rms_error_nm=rms, gear_torque_rms_nm=gear,
+                                 gear_removed_fraction=removed if gear > 0.1 else 9.0))
+    table = table_module.paired_table(pd.DataFrame(rows))
+    row = table.iloc[0]
+    assert row["method"] == "other" and row["rms_error_nm"] == pytest.approx(0.25)
+    assert row["rms_error_nm_lower"] == "4/4"
+    assert row["gear_removed_fraction"] == pytest.approx(0.2)   # scenario b (0.01 Nm) left out
+    assert "`other`" in table_module.markdown(table)

@@ -2,9 +2,9 @@
 
     python benchmarks/confine_overhead.py [JOBS]
 
-Runs JOBS trivial jobs through a two-slot :class:`rippleb.engine.pool.Pool` as rippleb's
+Runs JOBS trivial jobs through a two-slot :class:`rippleb.engine.process.pool.Pool` as rippleb's
 own jobs run (``confine=None``: PID namespace only), as a method's ran before issue 34
-(with the walls of :mod:`rippleb.engine.sandbox` switched off: mount namespace, own
+(with the walls of :mod:`rippleb.engine.process.sandbox` switched off: mount namespace, own
 /proc, terminals covered, a directory read-only, and since issue 34 a tmpfs as its scratch
 directory) and as a method's runs now
 (the same, then a second user namespace, Landlock, seccomp, no capabilities), in alternating batches of 20, and prints the median wall time per job of each.
@@ -18,8 +18,8 @@ import tempfile
 import time
 
 import rippleb  # noqa: F401 - before numpy: the portable numeric paths
-from rippleb.engine.isolation import Confinement
-from rippleb.engine.pool import Pool
+from rippleb.engine.process.isolation import Confinement
+from rippleb.engine.process.pool import Pool
 
 
 def _nothing() -> bytes:
@@ -42,7 +42,7 @@ def batch(confine, n: int = 20) -> float:
 
 def walled(on: bool, confine, n: int = 20) -> float:
     """:func:`batch` of a method's jobs, with or without the walls of issue 34."""
-    from rippleb.engine import sandbox
+    from rippleb.engine.process import sandbox
 
     lock_down, wipe = sandbox.lock_down, sandbox.wipe_command_line
     if not on:

@@ -51,7 +51,9 @@ def shares(sim, estimate) -> dict[str, float] | None:
     power = float(np.dot(g[mask], g[mask]))
     if not power > 0:
         return None
-    tau, device, sc = sim.log.torque_true, sim.device, sim.scenario
+    # the bridge as its channel reads it: the ripple terms the gauges' geometry gives it
+    # (a one-channel layout, the default; rippleb/simulator/flexspline.py)
+    tau, device, sc = sim.log.torque_true, sim.gauges[0], sim.scenario
 
     def share(x):
         return float(-np.dot(x[mask], g[mask]) / power)
@@ -77,9 +79,9 @@ def measure(seeds, scenarios, min_gear: float = 0.05, condition: str = "same-ses
     """``{scenario: {part: [share per device]}}`` and ``raw``'s ``gear_removed_fraction``
     (key ``"removed"``), over ``seeds``."""
     from rippleb.methods.raw import Raw
-    from rippleb.metrics import gear_removed
+    from rippleb.scoring.metrics import gear_removed
     from rippleb.simulator import simulate
-    from rippleb.streaming import run_method
+    from rippleb.harness import run_method
 
     table: dict = {}
     for seed in seeds:

@@ -4,7 +4,7 @@ through the runner's harness on simulated logs."""
 import numpy as np
 import pytest
 
-from rippleb.metrics import TRUTH_ARRAYS, Truth
+from rippleb.scoring.metrics import TRUTH_ARRAYS, Truth
 from rippleb.registry import Registry
 from rippleb.engine.cache import unpack
 from rippleb.engine.jobs import truth_from_message, truth_message

@@ -6,7 +6,7 @@ from hypothesis import strategies as st
 from rippleb.methods.lowpass import Lowpass
 from rippleb.methods.raw import Raw
 from rippleb.registry import Registry
-from rippleb.streaming import run_method
+from rippleb.harness import run_method
 from rippleb.testing import check_method, default_logs
 
 

@@ -9,7 +9,7 @@ from rippleb.methods._angle_adaptive_law import (GEAR_TERMS, SPEED_A, SPEED_GAIN
                                                  gear_torque, track_speed)
 from rippleb.methods.angle_adaptive import AngleAdaptive
 from rippleb.methods.gear_keeping import GearKeeping
-from rippleb.streaming import run_method
+from rippleb.harness import run_method
 from rippleb.testing import check_method
 
 SPEC = JointSpec()

@@ -21,7 +21,7 @@ import pandas as pd
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from rippleb.engine.joblog import OUTPUT_CAP_BYTES, JobLog
+from rippleb.engine.process.joblog import OUTPUT_CAP_BYTES, JobLog
 from rippleb.printable import escaped
 from test_bad_input import _dist  # a minimal installed distribution without pip
 
@@ -330,7 +330,7 @@ def test_a_resumed_sealed_run_keeps_the_walls_and_the_salt(breaker_site, tmp_pat
     """The issue's cases 1, 2, 4: unmounting the covers, writing rippleb's code or a .pth,
     reading the key, and, in a sealed run resumed with --salt-file FILE, reading the salt
     (its path on the command line, or guessed). The raw row beside it is untouched."""
-    from rippleb.engine.sandbox import missing_protections
+    from rippleb.engine.process.sandbox import missing_protections
 
     if missing_protections():
         pytest.skip(f"this kernel does not grant {missing_protections()}")
@@ -358,7 +358,7 @@ def test_a_resumed_sealed_run_keeps_the_walls_and_the_salt(breaker_site, tmp_pat
 @pytest.mark.slow
 @pytest.mark.parametrize("executor", ["local", "dask"])
 def test_the_walls_hold_as_root_and_on_dask(breaker_site, tmp_path, executor):
-    from rippleb.engine.sandbox import missing_protections
+    from rippleb.engine.process.sandbox import missing_protections
 
     if missing_protections():
         pytest.skip(f"this kernel does not grant {missing_protections()}")
@@ -419,7 +419,7 @@ def test_a_kernel_that_grants_less_is_said_once_and_refuses_sealed_runs(tmp_path
     import warnings
 
     import rippleb
-    from rippleb.engine import sandbox
+    from rippleb.engine.process import sandbox
     from rippleb.errors import InputError
 
     monkeypatch.setattr(sandbox, "_landlock", lambda scratch: False)

@@ -268,7 +268,7 @@ def test_where_the_cache_is_writable_a_rewrite_fails_the_rows_it_tampered(tmp_pa
     """Without a mount namespace and without Landlock (a kernel that refuses both) the worker
     can write the cache; the SHA-256 of every cached file, taken before any method ran, still
     catches it. (With Landlock alone the rewrite is refused: tests/test_hostile.py.)"""
-    from rippleb.engine import isolation, sandbox
+    from rippleb.engine.process import isolation, sandbox
 
     namespace = {}
     exec(HOSTILE, namespace)
@@ -363,7 +363,7 @@ def test_no_process_outlives_its_row(tmp_path, monkeypatch, namespaces, register
     import importlib
 
     import rippleb
-    from rippleb.engine import isolation
+    from rippleb.engine.process import isolation
 
     (tmp_path / "spawns_mod.py").write_text(SPAWNS)
     monkeypatch.syspath_prepend(str(tmp_path))
@@ -401,8 +401,8 @@ def test_a_job_that_signals_its_group_cannot_kill_its_keeper(monkeypatch, namesp
     the job reports; without one the worker ends itself, and the keeper lives to report the
     signal (before, it died with it, and the row's cause was lost or, when the worker was
     still fast enough, the row was saved by luck)."""
-    from rippleb.engine import isolation
-    from rippleb.engine.pool import Pool
+    from rippleb.engine.process import isolation
+    from rippleb.engine.process.pool import Pool
 
     if not namespaces:
         monkeypatch.setattr(isolation, "new_namespaces", lambda: (False, False))

@@ -4,9 +4,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from rippleb.metrics import (Truth, _lag_correlation, bandwidth_hz, delay_ms, max_error,
-                             moving_from_encoder, restart_max_error, rms_error, score,
-                             step_latency_ms, tick_stats)
+from rippleb.scoring.metrics import (Truth, _lag_correlation, bandwidth_hz, delay_ms, max_error,
+                                     moving_from_encoder, restart_max_error, rms_error, score,
+                                     step_latency_ms, tick_stats)
 
 FS = 20_000.0
 

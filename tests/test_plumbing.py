@@ -142,7 +142,7 @@ def test_without_a_mount_namespace_the_plumbing_stays_closed(tmp_path, monkeypat
     """A kernel that refuses the mount namespace: the worker sees the host's processes, but
     every rippleb process (runner, fork server, keepers) is not dumpable, so none of their
     descriptors opens; the run directory is still only rippleb's to write, by its rows."""
-    from rippleb.engine import isolation
+    from rippleb.engine.process import isolation
 
     namespace = {}
     exec(PROBER, namespace)
@@ -196,9 +196,9 @@ def test_garbage_in_the_control_pipe_ends_that_job_only(monkeypatch, garbage, sa
     opens nothing, as an unprivileged one."""
     import functools
 
-    from rippleb.engine import isolation
-    from rippleb.engine import sandbox as walls
-    from rippleb.engine.pool import Pool
+    from rippleb.engine.process import isolation
+    from rippleb.engine.process import sandbox as walls
+    from rippleb.engine.process.pool import Pool
 
     monkeypatch.setattr(isolation, "NAMESPACE_CHOICES", ())   # the kernel refuses namespaces
     if not sandbox:
@@ -221,7 +221,7 @@ def test_the_control_parser_never_raises_and_reads_only_what_a_keeper_writes():
     from hypothesis import given
     from hypothesis import strategies as st
 
-    from rippleb.engine.pool import control
+    from rippleb.engine.process.pool import control
 
     @given(st.binary(max_size=40))
     def anything(data):

@@ -249,7 +249,7 @@ def _reachable_files():
 
 def _seek(tmp_path, monkeypatch, register_methods, seeds: int):
     """A sealed run of the seeker; returns the salt, its device seeds and the seekers' reports."""
-    from rippleb.engine import sandbox
+    from rippleb.engine.process import sandbox
 
     keep = (DECOY_BYTES, DECOY_INT)  # noqa: F841 - alive in this process when it forks the server
     # Landlock off, so the seeker can write its (large) report outside its scratch directory:

@@ -11,16 +11,14 @@
 Artefacts are verified (:class:`rippleb.engine.cache.Artefact`) *before* the method's code is
 imported, so a method cannot rewrite an input between verification and use by earlier
 code of its own. :class:`Job` is a job as data, for the fork server
-(:mod:`rippleb.engine.forkserver`), which passes the registry it inherited; another executor
+(:mod:`rippleb.engine.process.forkserver`), which passes the registry it inherited; another executor
 passes one.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
 import pickle
-import time
 import traceback
 from dataclasses import dataclass
 
@@ -28,22 +26,22 @@ import numpy as np
 
 from rippleb.engine.cache import Artefact, load_log, log_bytes, pack, store
 from rippleb.data import SensorLog
-from rippleb import metrics, truthfree
-from rippleb.metrics import Truth
+from rippleb.scoring import metrics
+from rippleb.scoring.metrics import Truth
 from rippleb.registry import one_line
-from rippleb.scorable import NO_REFERENCE, NO_REFERENCE_MESSAGE, implausible
 from rippleb.engine.rows import FITTING, SCORED
-from rippleb.streaming import InvalidOutput, prepare_blocks, stream
+from rippleb import harness
+from rippleb.harness import InvalidOutput
 
 #: Everything the metrics compare with: the per-sample arrays and events of
-#: :class:`~rippleb.metrics.Truth` (its own list) plus the two torque columns.
+#: :class:`~rippleb.scoring.metrics.Truth` (its own list) plus the two torque columns.
 TRUTH_ARRAYS = metrics.TRUTH_ARRAYS + ("torque_true", "torque_ref", "torque_gear")
 
 
 @dataclass(frozen=True)
 class Job:
     """A job as data, so it can be sent to the process that forks it
-    (:mod:`rippleb.engine.forkserver`): ``job(registry)`` runs it and returns message bytes.
+    (:mod:`rippleb.engine.process.forkserver`): ``job(registry)`` runs it and returns message bytes.
 
     ``kind`` is ``simulate`` (``args`` of :func:`simulate_case`), ``fit`` (of
     :func:`fit_method` without the registry) or ``row`` (of :func:`run_row` without the
@@ -111,13 +109,13 @@ def fit_method(method: str, params: dict | None, calibration, registry) -> bytes
     Returns message bytes whose info holds ``status``, ``message``, ``params`` and
     ``fit_s`` and, if the fitted method could be pickled, whose array ``fitted`` holds the
     pickle. The runner stores it (:func:`rippleb.engine.cache.store`): a method's worker sees the
-    cache read-only (:func:`rippleb.engine.isolation.confine_files`).
+    cache read-only (:func:`rippleb.engine.process.isolation.confine_files`).
     """
     calibration = load_log(calibration)  # verified before any method code runs
     info = {"status": "ok", "message": "", "params": ""}
     try:
         cls = registry.get(method).load()
-        fitted, info["params"], info["fit_s"] = _fit(cls, params, calibration)
+        fitted, info["params"], info["fit_s"] = harness.fitted(cls, params, calibration)
     except Exception as exc:  # the fit's failure becomes the status of each of its rows
         traceback.print_exc()
         return pack({}, {**info, "status": "error", "message": one_line(exc)})
@@ -126,14 +124,6 @@ def fit_method(method: str, params: dict | None, calibration, registry) -> bytes
     except Exception:  # not picklable (a lambda, a handle): its rows fit it themselves
         return pack({}, info)
     return pack({"fitted": np.frombuffer(blob, dtype=np.uint8)}, info)
-
-
-def _fit(cls, params, calibration: SensorLog):
-    t0 = time.perf_counter()
-    method = cls(**(params or {}))
-    params_text = params_json(method)
-    method.fit(calibration.for_method(keep_ref=True))
-    return method, params_text, time.perf_counter() - t0
 
 
 def run_row(method: str, params: dict | None, calibration, evaluation, registry,
@@ -152,9 +142,8 @@ def run_row(method: str, params: dict | None, calibration, evaluation, registry,
         if blob is not None:
             instance = pickle.loads(blob)  # the method's own pickle, verified by hash
         else:
-            instance, info["params"], info["fit_s"] = _fit(cls, params, calibration)
-        instance.reset(evaluation.spec)
-        estimate, ticks = stream(instance.step, prepare_blocks(evaluation), len(evaluation))
+            instance, info["params"], info["fit_s"] = harness.fitted(cls, params, calibration)
+        estimate, ticks = harness.run(instance, evaluation)
     except InvalidOutput as exc:
         return {"info": {**info, "status": "invalid", "message": str(exc)}}
     except Exception as exc:  # any failure of the method is its row's status, never the run's
@@ -166,60 +155,4 @@ def run_row(method: str, params: dict | None, calibration, evaluation, registry,
 def row_message(result: dict) -> bytes:
     """:func:`run_row`'s result as message bytes."""
     return pack({k: result[k] for k in ("estimate", "ticks") if k in result}, result["info"])
-
-
-def params_json(method) -> str:
-    """A method's ``get_params()`` as sorted JSON ('' if it cannot say)."""
-    try:
-        return json.dumps(method.get_params(), sort_keys=True, default=repr)
-    except Exception:  # a broken get_params must not cost the row
-        return ""
-
-
-def check_estimate(arrays: dict, n_samples: int, n_ticks: int) -> tuple[np.ndarray, np.ndarray] | str:
-    """The estimate and ticks a row sent, or why they cannot be scored (one line).
-
-    The runner re-checks in its own process what the streaming loop checked in the
-    row's: a row that claims ``ok`` with a wrong-length or non-finite estimate is
-    ``invalid``, whatever it says.
-    """
-    estimate, ticks = arrays.get("estimate"), arrays.get("ticks")
-    if estimate is None or ticks is None:
-        return "the row sent no estimate"
-    if estimate.dtype.kind != "f" or estimate.shape != (n_samples,):
-        return f"estimate of shape {estimate.shape} dtype {estimate.dtype}, expected {n_samples} floats"
-    if not np.isfinite(estimate).all():
-        return "estimate holds NaN/inf values"
-    if ticks.dtype.kind not in "iu" or ticks.shape != (n_ticks,):
-        return f"tick times of shape {ticks.shape}, expected {n_ticks}"
-    return estimate, ticks
-
-
-def score_or_invalid(estimate: np.ndarray, truth: Truth) -> dict:
-    """The accuracy columns of an estimate (:func:`rippleb.metrics.score`) and its truth-free
-    columns (:func:`rippleb.truthfree.truth_free_scores`), or, when they
-    cannot stand as an ``ok`` row, ``{"status": "invalid", "message": why}``.
-
-    Every accuracy column must be finite or NaN (NaN: not defined for this log, e.g. no
-    ``torque_true`` in a recording), and the errors against each reference the log has must
-    be finite. A finite estimate can still overflow them (a strain scaled by 1e306 gave
-    ``rms_error_ref_nm = inf``); the overflow itself is expected here, hence no warning.
-    A recorded log's row is ``invalid`` too when its estimate is beyond the joint's range,
-    and :data:`~rippleb.scorable.NO_REFERENCE` when the log has no reference (:mod:`rippleb.scorable`).
-    """
-    why = implausible(estimate, truth.torque_limit)
-    if why:
-        return {"status": "invalid", "message": why}
-    with np.errstate(over="ignore", invalid="ignore"):
-        scores = {**metrics.score(estimate, truth), **truthfree.truth_free_scores(estimate, truth)}
-    needed = {c for c, ref in (("rms_error_nm", truth.torque_true), ("max_error_nm", truth.torque_true),
-                                ("rms_error_ref_nm", truth.torque_ref), ("max_error_ref_nm", truth.torque_ref))
-              if ref is not None}
-    bad = [f"{c} = {v}" for c, v in scores.items() if np.isinf(v) or (c in needed and not np.isfinite(v))]
-    if bad:
-        return {"status": "invalid", "message": f"its scores are not finite ({', '.join(bad)}): the estimate "
-                                                f"or the log is beyond what float64 can score"}
-    if truth.torque_true is None and truth.torque_ref is None:
-        return {**scores, "status": NO_REFERENCE, "message": NO_REFERENCE_MESSAGE}
-    return scores
 

@@ -75,7 +75,7 @@ def probe(registry: Registry, names: list[str], read, timeout: float | None):
     under ``timeout`` seconds each; return ``({name: bytes}, {name: one-line error})``.
     The calling process never runs a plugin's code, so one that hangs or exits at import
     delays only itself."""
-    from rippleb.engine.pool import Pool
+    from rippleb.engine.process.pool import Pool
 
     def job(entry):
         return lambda: read(entry)

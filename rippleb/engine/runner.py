@@ -1,7 +1,7 @@
 """The causal streaming runner: every method x scenario x condition x seed, one isolated process each.
 
 A run has three kinds of jobs (:mod:`rippleb.engine.jobs`), each in its own isolated child of
-:class:`rippleb.engine.pool.Pool`:
+:class:`rippleb.engine.process.pool.Pool`:
 
 * a *simulation* per (scenario content, condition, seed), plus the ``calibration``
   scenario per seed, simulated under ``same-session`` (it is the device's first
@@ -33,24 +33,26 @@ import warnings
 from pathlib import Path
 
 from rippleb import interrupts
-from rippleb.engine import isolation
+from rippleb.engine.process import isolation
 from rippleb.engine import jobs as job_fns
 from rippleb import numerics
-from rippleb.engine import sandbox, sealing
+from rippleb.engine.process import sandbox
+from rippleb.engine import sealing
 from rippleb.engine.cache import digest, log_bytes
 from rippleb.engine.checks import (check_calibration, check_options, check_recording, check_reference, check_scenario,
-                            check_scored_length)
+                                   check_scored_length)
 from rippleb.simulator.conditions import DEFAULT_CONDITION, calibration_condition
 from rippleb.data import SensorLog
 from rippleb.errors import InputError
-from rippleb.engine.forkserver import ForkServer
-from rippleb.metrics import Truth, tick_stats
-from rippleb.engine.pool import Pool
+from rippleb.engine.process.forkserver import ForkServer
+from rippleb.scoring.metrics import Truth
+from rippleb.scoring.row import score_row
+from rippleb.engine.process.pool import Pool
 from rippleb.registry import Registry
 from rippleb.engine.executors import row_tasks
 from rippleb.engine.methods import base_name, resolve_methods
 from rippleb.engine.results import MEASURED, ResultsFile, RunWarning, row_key, say_other_versions
-from rippleb.engine.rows import (CALIBRATION, FITTING, MAX_SEEDS, SCORED, Case, RowKey, scenario_hash,
+from rippleb.engine.rows import (CALIBRATION, FITTING, MAX_SEEDS, SCORED, Case, RowKey, check_rows, scenario_hash,
                                  select_conditions, select_scenarios, select_seeds, split_names)
 from rippleb.engine.rundir import log_dir, read_config, run_dir
 from rippleb.engine.scheduler import Plan, State, prepare_cases, progress_bar, record, say_retried, schedule
@@ -102,7 +104,7 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, s
         Called once the run directory is checked and locked, before any job starts.
     executor
         None for the local forked pool, or an object with ``run(tasks, record)`` that runs
-        whole rows elsewhere (:class:`rippleb.engine.dask_executor.DaskExecutor`).
+        whole rows elsewhere (:class:`rippleb.engine.dask.executor.DaskExecutor`).
     sealed
         A new sealed run (:mod:`rippleb.engine.sealing`): the path of a new file, outside ``out``,
         that the secret salt is written to when the run ends; the devices and the noise are
@@ -130,6 +132,9 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, s
         check_scenario(scenario)
     condition_list = select_conditions(conditions)
     seed_list = select_seeds(seeds, seed_start)
+    check_rows(len(names) * len(scenario_objs) * len(condition_list) * len(seed_list),
+               f"{len(names)} methods x {len(scenario_objs)} scenarios x {len(condition_list)} conditions x "
+               f"{len(seed_list)} seeds")
     calibration = load_scenario(CALIBRATION)
     config = {"methods": names, "conditions": condition_list, "seeds": seed_list,
               "scenarios": [str(Path(s).resolve()) if s.endswith(".toml") else s for s in
@@ -155,14 +160,19 @@ def run_resolved(registry: Registry, names: list[str], entries: list[tuple], con
     """
     _warn_native_numerics()
     plan = Plan(calibration_label=CALIBRATION)
+    # each content hash once, not per seed: hashing a scenario takes milliseconds, and a plan
+    # at MAX_SEEDS hashed 160 000 of them (over 10 minutes) before it started
+    hashed: dict[int, str] = {}
+    entries = [(scenario, calibration, extra, *(hashed.setdefault(id(s), scenario_hash(s))
+                                                for s in (scenario, calibration)))
+               for scenario, calibration, extra in entries]
     for seed in seeds:
-        for scenario, calibration, extra in entries:
-            content = scenario_hash(scenario)
+        interrupts.check_interrupted()   # a plan of many rows takes seconds: Ctrl-C stops it
+        for scenario, calibration, extra, content, cal_content in entries:
             for condition in conditions:
                 # the device's first session; under a condition of the joint itself
                 # (`realistic`) that session has the joint's physics too
-                cal_case = Case(CALIBRATION, scenario_hash(calibration), calibration_condition(condition),
-                                seed, FITTING)
+                cal_case = Case(CALIBRATION, cal_content, calibration_condition(condition), seed, FITTING)
                 plan.add_sim(calibration, cal_case)
                 case = Case(scenario.name, content, condition, seed, SCORED)
                 plan.add_sim(scenario, case)
@@ -271,7 +281,7 @@ def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, pro
         if executor is None:   # a Dask worker's log says what its own kernel grants
             sandbox.say_missing(sealed=sealed is not None or salt_file is not None)
         # The local jobs are forked by a server forked now, before the first simulation, so
-        # no job's memory ever holds a truth (rippleb.engine.forkserver). Another executor runs its
+        # no job's memory ever holds a truth (rippleb.engine.process.forkserver). Another executor runs its
         # rows elsewhere.
         server = (ForkServer.start(registry, preload=lambda: _warm(registry, plan)) if executor is None
                   else contextlib.nullcontext())
@@ -369,7 +379,5 @@ def evaluate(cls, calibration: SensorLog, evaluation: SensorLog, truth: Truth, p
     result = job_fns.run_row(getattr(cls, "name", "method"), params, calibration, evaluation, _One())
     fields = result["info"]
     if fields["status"] == "ok":
-        fields.update(job_fns.score_or_invalid(result["estimate"], truth))
-    if fields["status"] in MEASURED:
-        fields.update(tick_stats(result["ticks"], len(evaluation)))
+        fields.update(score_row(result, truth, len(evaluation), len(result["ticks"])))
     return fields

@@ -15,15 +15,16 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from rippleb.engine import isolation, jobs as job_fns
+from rippleb.engine.process import isolation
+from rippleb.engine import jobs as job_fns
 from rippleb.interrupts import check_interrupted
 from rippleb.engine.cache import Artefact, TamperedError, digest, load_log, log_bytes, store, unpack
 from rippleb.data import SensorLog
-from rippleb.metrics import tick_stats
-from rippleb.engine.pool import Pool
+from rippleb.scoring.row import score_row
+from rippleb.engine.process.pool import Pool
 from rippleb.registry import Registry, one_line
 from rippleb.variants import split_label
-from rippleb.engine.results import ENVIRONMENT, MEASURED, STATUSES, ResultsFile, RunWarning, system_info
+from rippleb.engine.results import ENVIRONMENT, STATUSES, ResultsFile, RunWarning, system_info
 from rippleb.engine.rows import SCORED, Case, RowKey
 from rippleb.engine.sealing import SEALED_COLUMN
 
@@ -319,17 +320,7 @@ def _score_row(value: bytes, state: State, case: Case) -> dict:
     fields = _row_fields(info)
     if fields["status"] != "ok":
         return fields
-    truth = state.truths[case]
-    n_samples, n_ticks = state.lengths[case]
-    checked = job_fns.check_estimate(arrays, n_samples, n_ticks)
-    if isinstance(checked, str):
-        return {**fields, "status": "invalid", "message": checked}
-    estimate, ticks = checked
-    fields["n_samples"] = n_samples
-    fields.update(job_fns.score_or_invalid(estimate, truth))
-    if fields["status"] in MEASURED:
-        fields.update(tick_stats(ticks, n_samples))
-    return fields
+    return {**fields, **score_row(arrays, state.truths[case], *state.lengths[case])}
 
 
 def _row_fields(info: dict) -> dict:

@@ -16,10 +16,11 @@ import time
 import numpy as np
 
 from rippleb.errors import PluginError
-from rippleb.metrics import Truth, score
+from rippleb.scoring.metrics import Truth
+from rippleb.scoring.row import score_row
 from rippleb.registry import Registry
 from rippleb.simulator import simulate
-from rippleb.streaming import run_method
+from rippleb.harness import run_method
 from rippleb.tuning import best_of, candidates, check_tunable, replaces_default
 
 #: What a method without a ``tunable`` attribute is recorded with.
@@ -36,7 +37,7 @@ def calibration_logs(seeds):
 def mean_score(cls, params: dict, sims) -> dict:
     """Mean of each score column of ``cls(**params)`` fitted and run on each calibration log."""
     rows = [_score_row(cls, params, s) for s in sims]
-    return {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
+    return {k: float(np.mean([r[k] for r in rows])) for k, v in rows[0].items() if isinstance(v, (int, float))}
 
 
 def scores(cls, params: dict, sims) -> list[float]:
@@ -45,7 +46,13 @@ def scores(cls, params: dict, sims) -> list[float]:
 
 
 def _score_row(cls, params, sim) -> dict:
-    return score(run_method(cls(**params), sim.log, sim.log)[0], Truth.from_simulation(sim))
+    """The row's columns (:func:`rippleb.scoring.row.score_row`); ValueError naming why when
+    its estimate cannot be scored."""
+    estimate, ticks = run_method(cls(**params), sim.log, sim.log)
+    row = score_row({"estimate": estimate, "ticks": ticks}, Truth.from_simulation(sim), len(estimate), len(ticks))
+    if row["status"] != "ok":
+        raise ValueError(f"{row['status']}: {row['message']}")
+    return row
 
 
 # ------------------------------------------------------------------ worker processes

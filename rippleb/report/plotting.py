@@ -8,6 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
+from rippleb.printable import escaped
+
+
 def _amplitude(x: np.ndarray) -> np.ndarray:
     window = np.hanning(len(x))
     return 2.0 * np.abs(np.fft.rfft((x - x.mean()) * window)) / window.sum()
@@ -30,7 +33,14 @@ _OTHER_COLORS = ("tab:olive", "tab:gray", "tab:pink", "k")
 def style(method: str, index: int = 0) -> dict:
     """matplotlib keyword arguments of ``method``'s line."""
     color, ls = METHOD_STYLE.get(method, (_OTHER_COLORS[index % len(_OTHER_COLORS)], "-"))
-    return {"color": color, "ls": ls, "label": method}
+    return {"color": color, "ls": ls, "label": plot_text(method)}
+
+
+def plot_text(value) -> str:
+    """A name (a method's label, a scenario's) as matplotlib text: matplotlib reads text
+    between two ``$`` as mathtext, and a name that is not valid mathtext (``$\\x$``) stopped
+    the whole report with a ParseFatalException; an escaped ``\\$`` is a dollar sign."""
+    return escaped(value).replace("$", r"\$")
 
 
 @dataclass
@@ -52,18 +62,18 @@ def fit_methods(methods, seed: int) -> tuple[dict, dict]:
     Returns ``(fitted, errors)``: method name to fitted instance, and to a one-line error.
     A name may be a variant's label (``order-tracking[q=20]``): built with its parameters.
     """
+    from rippleb import harness
     from rippleb.registry import Registry, one_line
     from rippleb.simulator import simulate
     from rippleb.variants import parse_label
 
     registry = Registry.discover()
-    calibration = simulate("calibration", seed).log.for_method(keep_ref=True)
+    calibration = simulate("calibration", seed).log
     fitted, errors = {}, {}
     for name in methods:
         try:
             variant = parse_label(name)
-            method = registry.get(variant.name).load()(**variant.params)
-            method.fit(calibration)
+            method = harness.fit(registry.get(variant.name).load()(**variant.params), calibration)
         except Exception as exc:  # a failing method costs its curves, not the report
             errors[name] = one_line(exc)
         else:
@@ -75,19 +85,17 @@ def stream_methods(fitted: dict, scenario: str, seed: int) -> ScenarioSignals:
     """Simulate ``scenario`` on ``seed`` and stream it through each fitted method.
 
     Each method is ``reset`` before its run (the Method contract), then fed blocks exactly
-    as the runner does (:func:`rippleb.streaming.prepare_blocks`, :func:`~rippleb.streaming.stream`).
+    as the runner does (:func:`rippleb.harness.run`).
     """
+    from rippleb import harness
     from rippleb.registry import one_line
     from rippleb.simulator import simulate
-    from rippleb.streaming import prepare_blocks, stream
 
     sim = simulate(scenario, seed)
-    visible = sim.log.for_method(keep_ref=False)
     estimates, errors = {}, {}
     for name, method in fitted.items():
         try:
-            method.reset(visible.spec)
-            estimates[name], _ = stream(method.step, prepare_blocks(visible), len(visible))
+            estimates[name], _ = harness.run(method, sim.log)
         except Exception as exc:
             errors[name] = one_line(exc)
     return ScenarioSignals(sim, estimates, errors)
@@ -102,10 +110,13 @@ def _pyplot():
     return plt
 
 
-def _save(fig, out_png) -> Path:
+def _save(fig, out_png, dpi: int = 110) -> Path:
+    from rippleb.files import atomic_path
+
     out = Path(out_png)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
+    with atomic_path(out) as tmp:   # replaced, never written through (a link there is replaced)
+        fig.savefig(tmp, dpi=dpi)
     fig.clf()
     _pyplot().close(fig)
     return out

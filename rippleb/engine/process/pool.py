@@ -2,7 +2,7 @@
 
 Why not joblib or multiprocessing: a method that sleeps forever, allocates without bound,
 forks, or signals its process group must cost exactly its own row. Every job therefore
-runs in its own pair of forked processes (:mod:`rippleb.engine.keeper`, :mod:`rippleb.engine.isolation`):
+runs in its own pair of forked processes (:mod:`rippleb.engine.process.keeper`, :mod:`rippleb.engine.process.isolation`):
 a *keeper* (rippleb's code: new session, new PID namespace where permitted, child
 subreaper) and the *worker* it forks, which runs the job with a memory limit
 (``RLIMIT_AS``, soft and hard, so the job cannot lift it), with every inherited file
@@ -15,7 +15,7 @@ No wait here is unbounded, and none ignores Ctrl-C or SIGTERM (:mod:`rippleb.int
 is ever half started or half ended, and :meth:`Pool.kill_all` ends every job within a
 few seconds, even one whose keeper is stuck.
 
-In a local run the keepers are forked by a fork server (:mod:`rippleb.engine.forkserver`) that
+In a local run the keepers are forked by a fork server (:mod:`rippleb.engine.process.forkserver`) that
 was forked before the first simulation, so no job's memory holds a truth; without a server
 (a Dask worker's row, ``rippleb list``'s import probes) the keeper is forked from here.
 
@@ -39,7 +39,7 @@ import time
 from dataclasses import dataclass, field
 
 from rippleb import interrupts
-from rippleb.engine.keeper import keeper
+from rippleb.engine.process.keeper import keeper
 
 POLL_S = 0.2
 KEEPER_GRACE_S = 5.0
@@ -129,7 +129,7 @@ class Pool:
     context
         Passed to every job: a job runs as ``job(context)``, or ``job()`` when None.
     server
-        A :class:`rippleb.engine.forkserver.ForkServer` to fork the keepers (it passes its own
+        A :class:`rippleb.engine.process.forkserver.ForkServer` to fork the keepers (it passes its own
         context); jobs must then be picklable. None forks them from this process.
     """
 
@@ -155,7 +155,7 @@ class Pool:
         """Start ``fn`` (see ``context``) in an isolated worker; its stdout and stderr go to
         the file ``output`` (or /dev/null), so a chatty plugin cannot garble the CLI's output.
 
-        ``confine``: None for rippleb's own jobs; for a method's, an :class:`~rippleb.engine.isolation.Confinement`
+        ``confine``: None for rippleb's own jobs; for a method's, an :class:`~rippleb.engine.process.isolation.Confinement`
         (the directories its worker sees read-only, the files hidden from it)."""
         # Held: a keeper started but not yet tracked would be orphaned with its pipes open.
         with interrupts.held():

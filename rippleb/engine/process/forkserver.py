@@ -6,7 +6,7 @@ own process (its stack frames, ``gc.get_objects()``, the raw heap) would find th
 is scored on. The fork server is forked from the runner when a run starts, before the
 first simulation, so no truth ever exists in it. The runner sends it each job as data
 (:class:`rippleb.engine.jobs.Job`, pickled by the runner: trusted bytes) with the job's two pipe
-ends attached; the server forks a keeper for it (:func:`rippleb.engine.keeper.keeper`, which forks
+ends attached; the server forks a keeper for it (:func:`rippleb.engine.process.keeper.keeper`, which forks
 the worker exactly as before) and replies with the keeper's PID. What a job returns still
 goes straight to the runner through its pipe.
 
@@ -43,7 +43,7 @@ import threading
 import time
 
 from rippleb import interrupts
-from rippleb.engine import isolation
+from rippleb.engine.process import isolation
 
 _LENGTH = struct.Struct("!Q")
 _PID = struct.Struct("!q")
@@ -139,7 +139,7 @@ class ForkServer:
 
 def _serve(sock: socket.socket, context, preload) -> None:
     """The server's loop: one keeper per request until the runner closes the socket."""
-    from rippleb.engine.keeper import keeper
+    from rippleb.engine.process.keeper import keeper
 
     isolation.die_with_parent()
     # Ctrl-C reaches the whole foreground process group: the runner handles it (it ends

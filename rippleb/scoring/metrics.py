@@ -5,7 +5,7 @@ Notation: ``e[n] = y[n] - tau[n]`` is the estimate ``y`` minus the truth ``tau``
 their count. Each metric is NaN where it is undefined (no truth column, no restart, no
 rest in the window, no distinct correlation peak, no torque step or chirp in the
 scenario). ``docs/metrics.md`` repeats these formulas. The two columns of the dynamic
-response, ``step_latency_ms`` and ``bandwidth_hz``, are computed in :mod:`rippleb.response`.
+response, ``step_latency_ms`` and ``bandwidth_hz``, are computed in :mod:`rippleb.scoring.response`.
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ import numpy as np
 from scipy.fft import next_fast_len
 
 from rippleb.data import MAX_TORQUE_FACTOR
-from rippleb.response import (BAND_FRACTION, BAND_MIN_BINS, BAND_STEP, HALF_POWER,  # noqa: F401 - re-exported
-                              STEP_BASELINE_S, STEP_HORIZON_S, STEP_MAX_RISE_S, bandwidth_hz, step_latency_ms)
+from rippleb.scoring.response import (BAND_FRACTION, BAND_MIN_BINS, BAND_STEP, HALF_POWER,  # noqa: F401 - re-exported
+                                      STEP_BASELINE_S, STEP_HORIZON_S, STEP_MAX_RISE_S, bandwidth_hz, step_latency_ms)
 
 MAX_DELAY_S = 0.100
 RESTART_ANGLE_RAD = 4.0 * np.pi   # two wave-generator revolutions
@@ -47,8 +47,8 @@ class Truth:
     ``steps`` rows ``(start, rise, change)`` [s, s, Nm] of the step loads' edges,
     ``chirps`` rows ``(start, stop, f0, f1)`` [s, s, Hz, Hz] of the chirp loads.
     ``torque_limit`` [Nm], recorded logs only: the largest torque the joint can carry; a row
-    whose estimate goes beyond it is not scored (:mod:`rippleb.scorable`).
-    What the method itself saw, for the truth-free columns (:mod:`rippleb.truthfree`):
+    whose estimate goes beyond it is not scored (:mod:`rippleb.scoring.scorable`).
+    What the method itself saw, for the truth-free columns (:mod:`rippleb.scoring.truthfree`):
     ``strain`` [V] and ``encoder_angle`` [rad], the wave-generator angle from the encoder
     counts (on a simulated log ``wave_angle`` is the true angle, not the encoder's); None
     on a truth built without them.
@@ -349,6 +349,9 @@ def score(estimate: np.ndarray, truth: Truth) -> dict[str, float]:
             "gear_rms", lambda: rms_error(np.zeros(len(mask)), truth.torque_gear, mask)),
         "gear_removed_fraction": gear_removed(estimate, truth.strain, truth.torque_gear, mask, memo=truth),
         "rms_error_without_gear_nm": rms_error(estimate, _without_gear(truth), mask),
+        # the paper's Table I: "during the motion" (the commanded velocity is not zero)
+        "rms_error_ref_motion_nm": rms_error(estimate, truth.torque_ref, mask & truth.moving),
+        "max_error_ref_motion_nm": max_error(estimate, truth.torque_ref, mask & truth.moving),
     }
 
 
@@ -362,5 +365,9 @@ def _without_gear(truth: Truth) -> np.ndarray | None:
 METRIC_COLUMNS = ("rms_error_nm", "max_error_nm", "rms_error_ref_nm", "max_error_ref_nm",
                   "delay_ms", "bandwidth_hz", "step_latency_ms", "restart_max_error_nm",
                   "stopped_rms_error_nm", "gear_torque_rms_nm", "gear_removed_fraction",
-                  "rms_error_without_gear_nm",
+                  "rms_error_without_gear_nm", "rms_error_ref_motion_nm", "max_error_ref_motion_nm",
                   "us_per_tick_p50", "us_per_tick_p99", "samples_per_s")
+#: Columns that came later than the file format: a results file without them still reads
+#: (as n/a). ``gear_removed_fraction`` replaced ``gear_erased_fraction`` (issue 38), which an
+#: older file holds instead and which is read as an extra column.
+LATER_COLUMNS = ("gear_removed_fraction", "rms_error_ref_motion_nm", "max_error_ref_motion_nm")

@@ -1,10 +1,10 @@
 """The two processes of a job: the *keeper* (rippleb's code) and the *worker* it forks.
 
-:class:`rippleb.engine.pool.Pool` (or the fork server, :mod:`rippleb.engine.forkserver`) forks a keeper
+:class:`rippleb.engine.process.pool.Pool` (or the fork server, :mod:`rippleb.engine.process.forkserver`) forks a keeper
 per job; the keeper takes a new session and PID namespace, becomes a child subreaper and
 forks the worker, which runs the job with a memory limit, with every inherited file
 descriptor closed but its result pipe, and with its output going through a pipe into a
-log the keeper opened and bounds (:mod:`rippleb.engine.joblog`; :mod:`rippleb.engine.isolation`
+log the keeper opened and bounds (:mod:`rippleb.engine.process.joblog`; :mod:`rippleb.engine.process.isolation`
 says why each step). The keeper reports the worker's PID and,
 when it has ended and everything it started is gone, its exit code, on the control pipe.
 
@@ -29,8 +29,8 @@ import tempfile
 import traceback
 
 from rippleb import integrity
-from rippleb.engine import isolation, sandbox
-from rippleb.engine.joblog import JobLog
+from rippleb.engine.process import isolation, sandbox
+from rippleb.engine.process.joblog import JobLog
 from rippleb.registry import one_line
 
 
@@ -39,7 +39,7 @@ def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output, confine=None) -> N
     Runs ``fn()`` in a worker it forks; never returns.
 
     ``confine`` is None for rippleb's own jobs (simulations), else what a method's worker
-    must not touch (:class:`rippleb.engine.isolation.Confinement`); such a worker gets a
+    must not touch (:class:`rippleb.engine.process.isolation.Confinement`); such a worker gets a
     scratch directory of its own, the one place it may write, removed when it ends."""
     try:
         # First: Ctrl-C reaches the runner's whole process group, and what is inherited
@@ -151,7 +151,7 @@ def _scratch(confine, own_mounts: bool) -> tuple[str | None, bool]:
     """The directory a method's worker may write, and whether this keeper made it.
 
     With a mount namespace of its own, the worker mounts a private tmpfs over the run's
-    scratch directory (:func:`rippleb.engine.isolation.confine_files`), which vanishes with
+    scratch directory (:func:`rippleb.engine.process.isolation.confine_files`), which vanishes with
     it: nothing to make or remove. Otherwise the keeper makes one (making and removing a
     directory per job cost about 1 ms, ``shutil.rmtree`` alone 3 ms in a forked process).
     """
@@ -170,15 +170,15 @@ def _remove(scratch: str) -> None:
 
 
 def _as_confinement(confine) -> isolation.Confinement:
-    """``confine`` as a :class:`~rippleb.engine.isolation.Confinement` (a bare sequence:
+    """``confine`` as a :class:`~rippleb.engine.process.isolation.Confinement` (a bare sequence:
     the read-only directories)."""
     return confine if isinstance(confine, isolation.Confinement) else isolation.Confinement(tuple(confine))
 
 
 def _confine(confine: isolation.Confinement, scratch: str, own_mounts: bool) -> None:
     """In a method's worker, before its code runs: close what the kernel lets it close off
-    (docs/robustness.md), mounts first (:mod:`rippleb.engine.isolation`), then the walls
-    that keep them (:mod:`rippleb.engine.sandbox`); say on its own log what it could not,
+    (docs/robustness.md), mounts first (:mod:`rippleb.engine.process.isolation`), then the walls
+    that keep them (:mod:`rippleb.engine.process.sandbox`); say on its own log what it could not,
     so a reader of the row's log knows the run was open. Its command line (the runner's,
     which may name a salt file) is wiped, and its temporary files go to ``scratch``."""
     hidden = [integrity.key_path(), *confine.hidden]
@@ -234,7 +234,7 @@ def _write_all(fd: int, data: bytes) -> None:
 
 
 def _rebind_output() -> None:
-    """Point Python's stdout and stderr at fds 1 and 2 (the job's output pipe, :mod:`rippleb.engine.joblog`)."""
+    """Point Python's stdout and stderr at fds 1 and 2 (the job's output pipe, :mod:`rippleb.engine.process.joblog`)."""
     # sys.stdout/stderr may be wrappers that bypass fds 1 and 2 (pytest, IDEs): rebind them.
     sys.stdout = open(1, "w", buffering=1, closefd=False)
     sys.stderr = open(2, "w", buffering=1, closefd=False)

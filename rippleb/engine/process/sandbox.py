@@ -1,7 +1,7 @@
 """The walls a method's worker cannot take down (issue 34): applied in the forked worker,
-after :func:`rippleb.engine.isolation.confine_files` and before any plugin code runs.
+after :func:`rippleb.engine.process.isolation.confine_files` and before any plugin code runs.
 
-The mounts of :mod:`rippleb.engine.isolation` alone did not hold: the worker owned the user
+The mounts of :mod:`rippleb.engine.process.isolation` alone did not hold: the worker owned the user
 namespace they were made in, so it held every capability over them and unmounted the
 key's cover, the read-only run directory and its ``/proc``. Each step below is the
 kernel's own mechanism, and none can be undone by the process it is applied to:
@@ -16,7 +16,7 @@ kernel's own mechanism, and none can be undone by the process it is applied to:
    required for the two steps after it.
 3. **Landlock** (landlock(7)): writing, creating, removing and renaming files is denied
    everywhere but beneath the job's scratch directory (a tmpfs of its own,
-   :data:`rippleb.engine.isolation.SCRATCH_OPTIONS`) and ``/dev/null``: the rippleb
+   :data:`rippleb.engine.process.isolation.SCRATCH_OPTIONS`) and ``/dev/null``: the rippleb
    package, site-packages, ``$HOME``, the run directory and the cache are read-only.
 4. **seccomp** through libseccomp (the library behind Docker's, systemd's and Flatpak's
    filters): :data:`DENIED_CALLS` fail with ``EPERM``, a ``clone`` that asks for a new
@@ -41,7 +41,7 @@ import functools
 import os
 import warnings
 
-from rippleb.engine import isolation
+from rippleb.engine.process import isolation
 from rippleb.errors import InputError, RunWarning
 
 #: Calls no method needs that would let it reach past its walls: mounts (old and new API),

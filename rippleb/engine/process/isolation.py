@@ -1,6 +1,6 @@
 """Process control for code rippleb does not trust: a method's import, fit and steps.
 
-A job runs in two processes (:mod:`rippleb.engine.pool`): a *keeper*, rippleb's own code, and
+A job runs in two processes (:mod:`rippleb.engine.process.pool`): a *keeper*, rippleb's own code, and
 the *worker* it forks, which runs the job. The keeper
 
 * starts a new session (``setsid``), and puts the worker in a process group of its own,

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
-from rippleb.scoring.metrics import gear_erased
+from rippleb.scoring.metrics import gear_removed
 from rippleb.scenario import load_scenario, scenario_from_dict
 from rippleb.simulator import Device, controller, joint, robot, simulate
 from rippleb.simulator.transmission import TransmissionError, structural_damping
@@ -39,10 +39,31 @@ def test_an_ideal_gear_adds_nothing_and_the_default_gear_adds_real_torque():
     assert not ideal.gear.active and not ideal.torque_gear.any()
     real = simulate("paper-quintic", 3)
     assert real.gear.active
-    # the same joint with and without the error: torque_true differs by torque_gear exactly
-    assert np.allclose(real.log.torque_true - real.torque_gear, ideal.log.torque_true, rtol=0, atol=1e-12)
-    assert np.sqrt(np.mean(real.torque_gear[real.eval_mask] ** 2)) > 0.1   # Nm, not a rounding
+    mask = real.eval_mask
+    g = real.torque_gear
+    assert np.sqrt(np.mean(g[mask] ** 2)) > 0.1   # Nm, not a rounding
+    # torque_gear is the larger part of what the error changes in torque_true; the rest is
+    # the count edges that move when the motion does, which are not the gear's torque and
+    # do not shrink with it (with the order-2 share held to Fig. 2, 0.25, measured: gear
+    # 0.33 Nm RMS, rest 0.21; seed 0: 0.27 and 0.20; seed 5: 0.38 and 0.22)
+    rest = real.log.torque_true - g - ideal.log.torque_true
+    assert np.sqrt(np.mean(rest[mask] ** 2)) < np.sqrt(np.mean(g[mask] ** 2))
     assert simulate("calibration", 3).torque_gear is None   # no row is scored on it
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_the_gear_torque_is_the_loops_smooth_response_to_the_error(seed):
+    """Scaled down 1e5 times, the error's torque scales with it: the pair the metrics
+    compare reads a fine encoder, so no count-edge jitter is left in it (with the logged
+    encoder's 2500 counts it was 0.08-0.21 Nm RMS whatever the error's size). Measured:
+    the scaled-up torque differs from the full one by 1.3 % (seed 0) and 1.9 % (seed 3) of
+    its RMS, the joint's own nonlinearity over 1e5 in size; asserted within 5 %."""
+    sc = load_scenario("paper-quintic")
+    full = simulate(sc, seed)
+    tiny = simulate(_with_error("paper-quintic", sc.transmission_error * 1e-5), seed)
+    mask = full.eval_mask
+    rms = lambda x: float(np.sqrt(np.mean(x[mask] ** 2)))   # noqa: E731
+    assert rms(tiny.torque_gear * 1e5 - full.torque_gear) < 0.05 * rms(full.torque_gear)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -74,14 +95,20 @@ def test_the_gear_torque_grows_with_speed_through_the_joints_dynamics():
     assert values[-1] > 2.0 * values[0], rms
 
 
-def test_erased_fraction_is_zero_for_the_truth_one_without_the_gear_and_scales_between():
+def test_removed_fraction_is_zero_for_the_strain_and_one_for_the_gear_taken_out_of_it():
+    """Contract: a gain and offset of the strain (``raw``) remove nothing, up to rounding
+    (measured 2e-16 and 1e-15); taking ``c g`` out of it removes ``c`` within 0.2 % (the
+    strain's own share of ``g`` moves the fitted gain a little: measured 0.99999 and 0.998
+    at ``c = 1`` on seeds 0 and 3)."""
     sim = simulate("paper-quintic", 0)
-    tau, g, mask = sim.log.torque_true, sim.torque_gear, sim.eval_mask
-    assert gear_erased(tau, tau, g, mask) == 0.0
-    assert gear_erased(tau - g, tau, g, mask) == pytest.approx(1.0)
-    assert gear_erased(tau - 0.3 * g, tau, g, mask) == pytest.approx(0.3)
-    assert np.isnan(gear_erased(tau, tau, np.zeros_like(g), mask))
-    assert np.isnan(gear_erased(tau, tau, None, mask))
+    s, g, mask = sim.log.strain, sim.torque_gear, sim.eval_mask
+    y = 9.7 * s + 0.3
+    assert abs(gear_removed(y, s, g, mask)) < 1e-12
+    for c in (1.0, 0.3, -1.0):
+        assert gear_removed(y - c * g, s, g, mask) == pytest.approx(c, rel=2e-3)
+    assert np.isnan(gear_removed(y, s, np.zeros_like(g), mask))
+    assert np.isnan(gear_removed(y, s, None, mask))
+    assert np.isnan(gear_removed(y, None, g, mask))
 
 
 # --- the real torque locked to the wave-generator angle beyond e: the [gear] knobs ----------

@@ -261,7 +261,8 @@ def read_rows(path: Path) -> list[dict]:
     if not lines:
         raise InputError(f"{path}: empty file, not a rippleb results file")
     header, body = lines[0], lines[1:]
-    required = ("method", "scenario", "seed", "status") + tuple(c for c in METRIC_COLUMNS if c not in LATER_COLUMNS)
+    required = ("method", "scenario", "seed", "status") + tuple(c for c in METRIC_COLUMNS
+                                                                if c not in LATER_COLUMNS)
     missing = [c for c in required if c not in header]
     if missing:
         raise InputError(f"{path}: not a rippleb results file (missing column(s) {', '.join(missing)})")

@@ -26,7 +26,7 @@ COLORS = {"raw": "#1f77b4", "lowpass": "#17becf", "current-based": "#bf00bf", "o
           "order-tracking-no-deadzone": "#ff7f0e", "order-tracking-no-backprop": "#8c564b",
           "switched-notch": "#2ca02c", "kalman-ripple": "#9467bd", "angle-adaptive": "#bcbd22",
           "angle-adaptive-frozen": "#7f7f7f", "spatial-filter": "#aec7e8", "fourier-lms": "#e377c2",
-          "periodic-dob": "#393b79", "gear-aware": "#525252"}
+          "periodic-dob": "#393b79", "gear-aware": "#525252", "gear-keeping": "#98df8a"}
 
 STYLE = """body{font-family:system-ui,sans-serif;margin:1.5em auto;max-width:1200px;color:#222}
 table{border-collapse:collapse;margin:.5em 0 1.5em;font-size:13px}

@@ -23,7 +23,7 @@ METHOD_STYLE = {
     "order-tracking-no-backprop": ("tab:brown", ":"), "switched-notch": ("tab:green", "-"),
     "kalman-ripple": ("tab:purple", "-"), "spatial-filter": ("tab:blue", "--"),
     "fourier-lms": ("tab:pink", "-"), "periodic-dob": ("tab:purple", "--"),
-    "gear-aware": ("tab:gray", "--"),
+    "gear-aware": ("tab:gray", "--"), "gear-keeping": ("#98df8a", "-"),
 }
 #: Scenarios whose signals the figures need: Table I/Fig. 5/6, speed coverage, restarts.
 SIGNAL_SCENARIOS = ("paper-quintic", "speed-sweep", "stop-restart")

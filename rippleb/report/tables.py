@@ -32,9 +32,10 @@ MATRIX_COLUMNS = {
     "bandwidth_hz": ("bandwidth of the estimate against torque_true", "Hz"),
     "step_latency_ms": ("latency of the estimate after a torque step", "ms"),
     # What each method did with the real torque the gear's transmission error puts at the
-    # ripple's own orders (rippleb/simulator/transmission.py): kept (0) or erased (1).
-    "gear_erased_fraction": ("fraction of the gear's real torque (transmission error) the method erased; "
-                             "0: kept, 1: erased", "1"),
+    # ripple's own orders (rippleb/simulator/transmission.py): passed on as the strain
+    # carries it (0, raw by construction) or taken out (1).
+    "gear_removed_fraction": ("fraction of the gear's real torque (transmission error) the method took out of "
+                              "the strain; 0: passed on as the strain carries it, 1: removed", "1"),
     "rms_error_without_gear_nm": ("RMS error against torque_true without the gear's transmission-error torque",
                                   "Nm"),
 }
@@ -43,7 +44,7 @@ MATRIX_COLUMNS = {
 #: them), so a re-run must reproduce them exactly; ``tests/test_published.py`` checks them.
 ACCURACY_COLUMNS = ("rms_error_nm", "max_error_nm", "rms_error_ref_nm", "max_error_ref_nm",
                     "delay_ms", "restart_max_error_nm", "stopped_rms_error_nm", "gear_torque_rms_nm",
-                    "gear_erased_fraction", "rms_error_without_gear_nm", "n_samples")
+                    "gear_removed_fraction", "rms_error_without_gear_nm", "n_samples")
 
 #: A timing cell is flagged noisy when its p99 spreads over seeds by more than this
 #: fraction of its median (interquartile range over median): on a quiet machine the

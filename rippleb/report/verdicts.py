@@ -41,10 +41,16 @@ MECHANISMS = {
     "angle-adaptive-frozen": "the calibration's map, never adapted: exact while the joint stays as "
                              "calibrated, wrong by whatever changed since (aging, re-assembly)",
     "gear-aware": "angle-adaptive-frozen's map fitted beside an inertial model of the gear's "
-                  "transmission-error torque, which it keeps: it removes what the calibration's "
-                  "ripple map holds and no more, so it is wrong by whatever changed since "
-                  "calibration, and a gear torque the inertial model misses (a resonance) is "
-                  "taken for ripple",
+                  "transmission-error torque: on the built-in calibration, which turns at many "
+                  "speeds, that changes the map little, so it keeps no more of the gear's torque "
+                  "than the frozen map and is wrong by whatever changed since calibration",
+    "gear-keeping": "angle-adaptive's map, fitted and learned beside an encoder model of the gear's "
+                    "dynamic torque (speed squared and acceleration, zero at rest) whose prediction "
+                    "its learning takes out and its estimate keeps, and learned only up to the "
+                    "calibration's top speed: it follows drift where it learns, holds its map where "
+                    "the joint turns faster than the calibration did, so a ripple changed since "
+                    "calibration (re-assembly) is re-learned only at lower speeds, and a gear torque "
+                    "its model misses (a resonance) still reaches its learning",
     "spatial-filter": "band-passes at orders 2, 4, 8 stepped in angle: they need no map, so drift, "
                       "re-assembly and power cycles pass them by, but they fade out at rest and at "
                       "low speed (the ripple stays there) and take the part of every torque change "

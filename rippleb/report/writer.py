@@ -28,6 +28,7 @@ from rippleb.scoring.metrics import METRIC_COLUMNS
 from rippleb.scoring.truthfree import TRUTH_FREE_COLUMNS
 from rippleb.engine.results import RunWarning, copy_rows, row_key, swept_columns
 from rippleb.engine.sealing import sealed_text
+from rippleb.report.gear_section import gear_markdown
 from rippleb.report.layouts_section import layouts_markdown
 from rippleb.report.tuning_table import tuning_markdown
 from rippleb.report.verdicts import method_verdicts
@@ -65,7 +66,7 @@ def frame_condition_count(frame) -> int:
 
 
 #: Metrics that no row can hold below zero (``step_latency_ms`` can: an estimate may lead).
-NON_NEGATIVE = tuple(c for c in METRIC_COLUMNS if c not in ("step_latency_ms", "gear_erased_fraction")) + \
+NON_NEGATIVE = tuple(c for c in METRIC_COLUMNS if c not in ("step_latency_ms", "gear_removed_fraction")) + \
     ("ripple_wg_nm", "rest_std_nm")
 
 
@@ -103,7 +104,7 @@ def tables_markdown(frame) -> str:
              "that condition; then mean ± 95 % t-interval over seeds.", "",
              condition_summary_markdown(frame), ""]
     parts += [f"- {s}" for s in condition_headline(frame)] + [""]
-    parts += _gear_section(frame) + layouts_markdown(frame)
+    parts += gear_markdown(frame) + layouts_markdown(frame)
     verdicts = method_verdicts(frame)
     if verdicts:
         parts += ["### Each method in plain words", "",
@@ -114,25 +115,6 @@ def tables_markdown(frame) -> str:
         parts += _condition_section(condition, rows, source)
     parts += ["## Rows that did not finish ok", "", failed_markdown(frame)]
     return "\n".join(parts)
-
-
-def _gear_section(frame) -> list[str]:
-    """What each method did with the gear's real torque (docs/metrics.md, "What a method
-    erased"): the share it erased and its error against the joint without it, per condition."""
-    if "gear_erased_fraction" not in frame or not frame["gear_erased_fraction"].notna().any():
-        return []
-    return ["## What each method did with the gear's real torque", "",
-            "Every harmonic drive's transmission error puts real torque at the ripple's own orders "
-            "(docs/physics.md, \"Transmission error\"). `gear_erased_fraction`: the share of it a "
-            "method removed (0 kept, 1 erased; ripple left at orders 1 and 2 moves it on single "
-            "devices, so read the means). A torque controller needs the real torque and ranks by "
-            "`rms_error_nm` above; an application that wants the gear's torque gone ranks by "
-            "`rms_error_without_gear_nm`.", "",
-            "### `gear_erased_fraction` (mean over the scenarios, 95 % interval)", "",
-            condition_summary_markdown(frame, "gear_erased_fraction"), "",
-            "### `rms_error_without_gear_nm` (mean over the scenarios, 95 % interval)", "",
-            condition_summary_markdown(frame, "rms_error_without_gear_nm"), ""] + \
-        [f"- {s}" for s in condition_headline(frame, "rms_error_without_gear_nm")] + [""]
 
 
 def _condition_section(condition: str, rows, source: str) -> list[str]:
@@ -228,7 +210,7 @@ READING_SIMULATED = """## Reading these tables
   torque at orders 1 and 2, the ripple's own, through the joint's dynamics
   (`docs/physics.md`, "Transmission error"). `torque_ref` does not know it. A method that
   removes everything at those orders removes it too and is charged for it in
-  `rms_error_nm`; `gear_erased_fraction` and `rms_error_without_gear_nm` say what each
+  `rms_error_nm`; `gear_removed_fraction` and `rms_error_without_gear_nm` say what each
   method did with it.
 - `realistic` is the same joint as `same-session` with the physics no method models turned on
   at their documented sizes, in the calibration session too: gauge dynamics that change the

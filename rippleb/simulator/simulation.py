@@ -64,9 +64,10 @@ class Simulation:
     gear
         The drive's transmission error (:mod:`rippleb.simulator.transmission`).
     torque_gear
-        What that error adds to ``torque_true`` [Nm]: the real torque of this joint minus
-        that of the same joint with an ideal gear (zero when the error is off; None for an
-        unscored session, the calibration, where no row is scored).
+        What that error adds to ``torque_true`` [Nm]: :func:`gear_torque`, the real torque
+        of this joint minus that of the same joint with an ideal gear, both read through a
+        fine encoder (zero when the error is off; None for an unscored session, the
+        calibration, where no row is scored).
     gauges
         Per amplifier channel of the gauge layout, the device as that channel reads it (its
         ripple terms are the channel's; :mod:`rippleb.simulator.flexspline`): ``gauges[0]``
@@ -124,16 +125,13 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
             sc.external_torque(t))
     drive = dict(encoder=errors, damping=structural_damping(knobs.loss_factor, table))
     q, qd, theta_m, _, tau_true, commanded = controller.run(*loop, gear=gear, **drive)
-    # What the gear's error adds to the real torque (the metrics' "erased" columns; never
-    # streamed to a method): this joint against the same joint with an ideal gear, each
-    # under its own loop (docs/metrics.md, "What a method erased", says what else the
-    # difference holds: the loop's response to the error, and encoder-edge jitter). Only
-    # for a scored session: no row is scored on the calibration log, and its twin run
-    # would be the longest integration of every case.
+    # What the gear's error adds to the real torque (the metrics' gear columns; never
+    # streamed to a method). Only for a scored session: no row is scored on the
+    # calibration log, and its twin runs would be the longest integrations of every case.
     if not sc.scored:
         torque_gear = None
     elif gear.active:
-        torque_gear = tau_true - controller.run(*loop, **drive)[4]
+        torque_gear = gear_torque(loop, gear, **drive)
     else:
         torque_gear = np.zeros(n)
 
@@ -171,6 +169,32 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     return Simulation(log=log, moving=np.abs(qd_d) > 1e-12, wave_angle=theta_m,
                       joint_velocity=qd, eval_mask=(t >= start) & (t <= stop),
                       scenario=sc, device=device, gear=gear, torque_gear=torque_gear, gauges=gauges)
+
+
+#: Encoder counts per motor revolution of the pair :func:`gear_torque` compares: so fine
+#: that no count edge moves by a measurable time when the gear's error moves the motor
+#: (the integrator reads ``floor(theta / step) step``; at 2**40 counts the step is 6e-12
+#: rad, and motor angles up to 1e3 rad stay below 2**53 steps, exact in a double).
+FINE_COUNTS_PER_REV = 2**40
+
+
+def gear_torque(loop: tuple, gear: TransmissionError, **drive) -> np.ndarray:
+    """The real torque [Nm] the gear's transmission error adds: the joint with ``gear``
+    minus the same joint with an ideal gear, both under their own loop read through an
+    encoder of :data:`FINE_COUNTS_PER_REV` counts (``loop``: :func:`controller.run`'s
+    arguments before the drive's, ``drive`` the rest of the drive as :func:`controller.run`
+    takes it: the encoder's errors and the structural damping).
+
+    Not the logged joint minus its ideal-gear twin: both read the 2500-count encoder, and
+    any change of the motion, however small, moves their count edges and current steps
+    differently, a jitter of 0.08-0.21 Nm RMS that stays when the error is scaled down
+    1e5 times (docs/physics.md, "Transmission error"). With the fine encoder the
+    difference is the loop's smooth response to the error, proportional to it at small
+    sizes (``tests/test_transmission.py``); the logged joint's own count-edge torque,
+    which is there with any gear, stays in ``torque_true - torque_gear``.
+    """
+    fine = (dataclasses.replace(loop[0], counts_per_rev=FINE_COUNTS_PER_REV),) + tuple(loop[1:])
+    return controller.run(*fine, gear=gear, **drive)[4] - controller.run(*fine, **drive)[4]
 
 
 def _excitation(sc: Scenario, t: np.ndarray) -> np.ndarray:

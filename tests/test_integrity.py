@@ -268,12 +268,13 @@ def test_where_the_cache_is_writable_a_rewrite_fails_the_rows_it_tampered(tmp_pa
     """Without a mount namespace and without Landlock (a kernel that refuses both) the worker
     can write the cache; the SHA-256 of every cached file, taken before any method ran, still
     catches it. (With Landlock alone the rewrite is refused: tests/test_hostile.py.)"""
-    from rippleb.engine.process import isolation, sandbox
+    from rippleb.engine.process import isolation, landlock
 
     namespace = {}
     exec(HOSTILE, namespace)
-    monkeypatch.setattr(isolation, "NAMESPACE_CHOICES", isolation.NAMESPACE_CHOICES[1:])  # no mount namespace
-    monkeypatch.setattr(sandbox, "_landlock", lambda scratch: False)                       # nor Landlock
+    monkeypatch.setattr(isolation, "NAMESPACE_CHOICES",   # no mount namespace
+                        tuple(c for c in isolation.NAMESPACE_CHOICES if not c[1].mount))
+    monkeypatch.setattr(landlock, "restrict", lambda *args, **kwargs: ["Landlock"])          # nor Landlock
     (tmp_path / "tmp").mkdir()
     monkeypatch.setenv("TMPDIR", str(tmp_path / "tmp"))   # the forger rewrites this run's cache only
     monkeypatch.setattr("tempfile.tempdir", None)
@@ -369,7 +370,7 @@ def test_no_process_outlives_its_row(tmp_path, monkeypatch, namespaces, register
     monkeypatch.syspath_prepend(str(tmp_path))
     cls = importlib.import_module("spawns_mod").Spawns
     if not namespaces:
-        monkeypatch.setattr(isolation, "new_namespaces", lambda: (False, False))
+        monkeypatch.setattr(isolation, "new_namespaces", lambda: isolation.NONE)
     register_methods(cls)
     frame = rippleb.run(methods="spawns", scenarios="static-contact", seeds=1)
     assert list(frame.status) == ["ok"], frame.message.tolist()
@@ -405,7 +406,7 @@ def test_a_job_that_signals_its_group_cannot_kill_its_keeper(monkeypatch, namesp
     from rippleb.engine.process.pool import Pool
 
     if not namespaces:
-        monkeypatch.setattr(isolation, "new_namespaces", lambda: (False, False))
+        monkeypatch.setattr(isolation, "new_namespaces", lambda: isolation.NONE)
     job = _signals_its_group_and_parent if namespaces else _signals_its_group
     expected = ("done", b"reported") if namespaces else ("died", -signal.SIGTERM)
     outcomes = []

@@ -146,7 +146,8 @@ def test_without_a_mount_namespace_the_plumbing_stays_closed(tmp_path, monkeypat
 
     namespace = {}
     exec(PROBER, namespace)
-    monkeypatch.setattr(isolation, "NAMESPACE_CHOICES", isolation.NAMESPACE_CHOICES[1:])  # no mount namespace
+    monkeypatch.setattr(isolation, "NAMESPACE_CHOICES",   # no mount namespace
+                        tuple(c for c in isolation.NAMESPACE_CHOICES if not c[1].mount))
     run_dir = tmp_path / "run"
     for name, value in {"PROBE_RUN_DIR": run_dir, "PROBE_RUNNER": os.getpid(),
                         "TMPDIR": tmp_path}.items():
@@ -229,9 +230,10 @@ def test_the_control_parser_never_raises_and_reads_only_what_a_keeper_writes():
         assert parsed is None or all(v is None or isinstance(v, int) for v in parsed)
 
     anything()
-    assert control(b"") == (None, None)
-    assert control(b"123 1") == (None, None)            # cut short by a read
-    assert control(b"123 1\n") == (123, None)
-    assert control(b"123 0\n-9\n") == (123, -9)
+    assert control(b"") == (None, None, None)
+    assert control(b"123 1") == (None, None, None)            # cut short by a read
+    assert control(b"123 1\n") == (123, None, None)
+    assert control(b"123 0\n-9 -1\n") == (123, -9, -1)     # the method never started
+    assert control(b"123 0\n0 1500000\n") == (123, 0, 1500000)
     for forged in (b"x", b"123 1\n0\n0\n", b"123 1\nexit 0\n", b"123 2\n", b"123 1\n12345\n"):
         assert control(forged) is None, forged

@@ -249,12 +249,12 @@ def _reachable_files():
 
 def _seek(tmp_path, monkeypatch, register_methods, seeds: int):
     """A sealed run of the seeker; returns the salt, its device seeds and the seekers' reports."""
-    from rippleb.engine.process import sandbox
+    from rippleb.engine.process import landlock
 
     keep = (DECOY_BYTES, DECOY_INT)  # noqa: F841 - alive in this process when it forks the server
     # Landlock off, so the seeker can write its (large) report outside its scratch directory:
     # it changes nothing in memory, the environment or what files exist, which it searches.
-    monkeypatch.setattr(sandbox, "_landlock", lambda scratch: True)
+    monkeypatch.setattr(landlock, "restrict", lambda *args, **kwargs: [])
     monkeypatch.setenv("SEEKER_OUT", str(tmp_path / "found"))
     monkeypatch.setenv("SEEKER_DIRS", os.pathsep.join([str(tmp_path / "run"), str(tmp_path / "tmp")]))
     (tmp_path / "tmp").mkdir()

@@ -31,7 +31,6 @@ last resort); a keeper's worker dies with it.
 from __future__ import annotations
 
 import contextlib
-import functools
 import os
 import pickle
 import select
@@ -139,7 +138,7 @@ class ForkServer:
 
 def _serve(sock: socket.socket, context, preload) -> None:
     """The server's loop: one keeper per request until the runner closes the socket."""
-    from rippleb.engine.process.keeper import keeper
+    from rippleb.engine.process.keeper import Bound, keeper
 
     isolation.die_with_parent()
     # Ctrl-C reaches the whole foreground process group: the runner handles it (it ends
@@ -162,7 +161,7 @@ def _serve(sock: socket.socket, context, preload) -> None:
         if pid == 0:
             sock.close()
             isolation.die_with_parent()  # the server is single-threaded: its death ends the job
-            keeper(functools.partial(job, context), result_w, ctrl_w, memory_mb, output, confine)  # never returns
+            keeper(Bound(job, context), result_w, ctrl_w, memory_mb, output, confine)  # never returns
         keepers.add(pid)
         os.close(result_w)
         os.close(ctrl_w)

@@ -419,17 +419,17 @@ def test_a_kernel_that_grants_less_is_said_once_and_refuses_sealed_runs(tmp_path
     import warnings
 
     import rippleb
-    from rippleb.engine.process import sandbox
+    from rippleb.engine.process import landlock, sandbox
     from rippleb.errors import InputError
 
-    monkeypatch.setattr(sandbox, "_landlock", lambda scratch: False)
-    assert sandbox.missing_protections() == ("Landlock (a read-only file system but its scratch directory)",)
+    monkeypatch.setattr(landlock, "restrict", lambda *args, **kwargs: ["Landlock (reads and writes confined)"])
+    assert sandbox.missing_protections() == ("Landlock (reads and writes confined)",)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         frame = rippleb.run(["raw"], ["static-contact"], [0], progress=False)
     said = [str(w.message) for w in caught if "does not grant" in str(w.message)]
-    assert said == ["this kernel does not grant a method's process Landlock (a read-only file system but its "
-                    "scratch directory): it can reach more than docs/robustness.md says (section 10)"]
+    assert said == ["this kernel does not grant a method's process Landlock (reads and writes confined): it can "
+                    "reach more than docs/robustness.md says (sections 10 and 11)"]
     assert frame.status.tolist() == ["ok"]
     with pytest.raises(InputError, match="--sealed needs every wall around a method's process, and this kernel "
                                          "does not grant Landlock"):

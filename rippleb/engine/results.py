@@ -322,6 +322,8 @@ def _check_row(header: list[str], cells: list[str]) -> tuple[dict, str | None]:
 
 def warn_native_numerics() -> None:
     """One line when this process cannot give rows that re-run to the last bit elsewhere."""
+    from rippleb import numerics
+
     state = numerics.state()
     if state != numerics.PORTABLE:
         why = (f"{numerics.NATIVE_SWITCH} is set" if numerics.native_requested()
@@ -333,6 +335,8 @@ def warn_native_numerics() -> None:
 
 def warn_native_rows(rows: list[dict]) -> None:
     """One line when rows that ran elsewhere (Dask workers) used their host's own paths."""
+    from rippleb import numerics
+
     native = [row["numerics"] for row in rows if row.get("numerics", numerics.PORTABLE) != numerics.PORTABLE]
     if native:
         warnings.warn(RunWarning(f"{len(native)} rows ran on workers with their host's own numeric "

@@ -161,7 +161,7 @@ def _serve(sock: socket.socket, context, preload) -> None:
         if pid == 0:
             sock.close()
             isolation.die_with_parent()  # the server is single-threaded: its death ends the job
-            keeper(Bound(job, context), result_w, ctrl_w, memory_mb, output, confine)  # never returns
+            keeper(Bound(job, context, always=True), result_w, ctrl_w, memory_mb, output, confine)  # never returns
         keepers.add(pid)
         os.close(result_w)
         os.close(ctrl_w)

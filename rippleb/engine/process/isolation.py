@@ -80,11 +80,13 @@ def die_with_parent() -> None:
 
 class Namespaces(NamedTuple):
     """Which new namespaces a job's processes got: ``pid`` (with a user namespace),
-    ``mount`` and ``net`` (a network namespace with nothing in it but a loopback that is down)."""
+    ``mount`` and ``net`` (a network namespace with nothing in it but a loopback that is down);
+    ``capped``: whether a control group caps its processes (:mod:`rippleb.engine.process.tasks`)."""
 
     pid: bool
     mount: bool
     net: bool
+    capped: bool = False
 
 
 #: What :func:`new_namespaces` asks for, best first: ``(unshare flags, what they grant)``.

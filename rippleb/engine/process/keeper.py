@@ -38,7 +38,7 @@ import time
 import traceback
 
 from rippleb import integrity
-from rippleb.engine.process import isolation, sandbox, scrub
+from rippleb.engine.process import isolation, sandbox, scrub, tasks
 from rippleb.engine.process.joblog import JobLog
 from rippleb.registry import one_line
 
@@ -62,6 +62,9 @@ def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output, confine=None) -> N
         log = JobLog(output)
         log.open()   # before the worker can change what the run directory's paths lead to
         confine = None if confine is None else _as_confinement(confine)
+        # Before the namespaces: a group of the host's pids hierarchy caps the job's processes
+        # (its worker's and their descendants', this keeper's one among them).
+        group = tasks.enter(sandbox.MAX_TASKS + 1) if confine is not None else None
         granted = isolation.new_namespaces()
         scratch, made = _scratch(confine, granted.mount)
         isolation.become_subreaper()
@@ -79,7 +82,8 @@ def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output, confine=None) -> N
             log.give_to_worker()
             os.read(go_r, 1)   # a job that writes into the control pipe must not get there first
             os.close(go_r)
-            _worker(fn, result_w, memory_mb, confine, scratch, granted, clock.write_fd)  # never returns
+            _worker(fn, result_w, memory_mb, confine, scratch, granted._replace(capped=group is not None),
+                    clock.write_fd)  # never returns
         os.close(result_w)
         os.close(log.write_fd)
         os.close(clock.write_fd)
@@ -92,6 +96,7 @@ def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output, confine=None) -> N
         else:
             isolation.end_descendants()
         log.close()   # the log is whole before the runner hears the job ended
+        tasks.leave(group)
         if made:
             _remove(scratch)
         _write_all(ctrl_w, f"{os.waitstatus_to_exitcode(status)} {clock.span_ns()}\n".encode())
@@ -220,22 +225,23 @@ class Bound:
         returns from it the part that runs the method's code.
     context
         What the job is called with (the registry), or None.
+    always
+        Call the job with ``context`` even when it is None (the fork server passes its own,
+        whatever it is); else None means a job without arguments.
     """
 
-    def __init__(self, job, context=None):
+    def __init__(self, job, context=None, always: bool = False):
         self.job = job
-        self.context = context
+        self.args = (context,) if always or context is not None else ()
 
     def __call__(self):
-        return self.job() if self.context is None else self.job(self.context)
+        return self.job(*self.args)
 
     def prepare(self):
         """rippleb's part of the job, run before the walls; returns the method's part. A job
         without a ``prepare`` runs whole behind the walls."""
         prepare = getattr(self.job, "prepare", None)
-        if prepare is None:
-            return self
-        return prepare() if self.context is None else prepare(self.context)
+        return self if prepare is None else prepare(*self.args)
 
 
 def _scratch(confine, own_mounts: bool) -> tuple[str | None, bool]:
@@ -284,7 +290,7 @@ def _confine(confine: isolation.Confinement, scratch: str, granted: isolation.Na
     _numba_cache_into(scratch)
     missing = mounts + network + sandbox.lock_down(
         scratch, nested_namespace=granted.mount and not mounts, readable=confine.readable,
-        own_proc=granted.mount and "a /proc of its own" not in mounts, own_users=granted.pid)
+        own_proc=granted.mount and "a /proc of its own" not in mounts, own_users=granted.pid, capped=granted.capped)
     if missing:
         print(f"rippleb: this worker is not confined: no {', no '.join(missing)} (the kernel refused)",
               file=sys.stderr)

@@ -128,31 +128,33 @@ def package_paths(module: str) -> tuple[str, ...]:
     return (spec.origin,) if spec.origin and os.path.exists(spec.origin) else ()
 
 
-def restrict(scratch: str | None, readable=(), own_proc: bool = True) -> list[str]:
+def restrict(scratch: str | None, readable=(), own_proc: bool = True, reads: bool = True) -> list[str]:
     """Restrict this process (and what it forks) to the module docstring's rules; return
     what this kernel could not enforce, one phrase each (empty when all held).
 
     ``scratch``: the one directory it may write; ``readable``: what it may read beyond
     the libraries (its own package); ``own_proc``: ``/proc`` shows its own PID namespace
-    only, so all of it is readable (else only its own entry)."""
+    only, so all of it is readable (else only its own entry). ``reads`` False leaves reading
+    and the network open, as issue 34's walls did (``benchmarks/confine_overhead.py``
+    measures what closing them costs)."""
     version = abi()
     if version < 1:
         return ["Landlock (reads and writes confined)"]
     write = WRITE_FILE | (TRUNCATE if version >= 3 else 0)
-    read = READ_FILE | READ_DIR | EXECUTE
+    read = READ_FILE | READ_DIR | EXECUTE if reads else 0
     fs = read | write | CHANGES_ENTRIES | (REFER if version >= 2 else 0)
-    net = BIND_TCP | CONNECT_TCP if version >= 4 else 0
-    scoped = SCOPE_ABSTRACT_UNIX_SOCKET | SCOPE_SIGNAL if version >= 6 else 0
+    net = BIND_TCP | CONNECT_TCP if version >= 4 and reads else 0
+    scoped = SCOPE_ABSTRACT_UNIX_SOCKET | SCOPE_SIGNAL if version >= 6 and reads else 0
     attr = _RulesetAttr(fs, net, scoped)
     size = 24 if version >= 6 else 16 if version >= 4 else 8
     ruleset = _syscall(SYS_CREATE_RULESET, ctypes.byref(attr), ctypes.c_size_t(size), ctypes.c_uint32(0))
     if ruleset < 0:
         return ["Landlock (reads and writes confined)"]
     proc = ("/proc",) if own_proc else (f"/proc/{os.getpid()}", "/proc/cpuinfo", "/proc/meminfo", "/proc/stat")
-    rules = [(path, read) for path in (*library_paths(), *readable, *SYS_PATHS, *proc, *FILES, *DEVICES)]
+    rules = [(path, read) for path in (*library_paths(), *readable, *SYS_PATHS, *proc, *FILES, *DEVICES) if read]
     # The directory that holds the method's package may be listed, not read: Python's import
     # system finds a module by listing the directories of sys.path.
-    rules += [(os.path.dirname(path.rstrip("/")), READ_DIR) for path in readable]
+    rules += [(os.path.dirname(path.rstrip("/")), READ_DIR) for path in readable if read]
     rules += [(os.devnull, read | write)] + ([(scratch, fs)] if scratch else [])
     try:
         for path, rights in rules:
@@ -162,6 +164,8 @@ def restrict(scratch: str | None, readable=(), own_proc: bool = True) -> list[st
             return ["Landlock (reads and writes confined)"]
     finally:
         os.close(ruleset)
+    if not reads:
+        return []
     missing = [] if net else ["Landlock's network rules (Linux 6.7)"]
     return missing + ([] if scoped else ["Landlock's scopes (Linux 6.12)"])
 

@@ -45,7 +45,7 @@ import os
 import resource
 import warnings
 
-from rippleb.engine.process import isolation, landlock
+from rippleb.engine.process import isolation, landlock, tasks
 from rippleb.errors import InputError, RunWarning
 
 #: Calls no method needs that would let it reach past its walls: mounts (old and new API),
@@ -103,15 +103,17 @@ def _syscall(*args) -> int:
 
 
 def lock_down(scratch: str | None, nested_namespace: bool, readable=(), own_proc: bool = True,
-              own_users: bool = True) -> list[str]:
+              own_users: bool = True, capped: bool = False) -> list[str]:
     """Apply every step this kernel grants (module docstring) to this process; return what
     it could not, one phrase each (empty when all held). ``scratch``: the one directory
     this process may write; ``nested_namespace``: keep its mounts out of its reach (only
     where it runs in a user namespace of rippleb's, with mounts to keep); ``readable``
     and ``own_proc``: what it may read beyond the libraries (:func:`rippleb.engine.process.landlock.restrict`);
     ``own_users``: it runs in a user namespace of its own, where the process cap counts
-    its own processes only (elsewhere it would count every process of the user)."""
-    missing = [] if own_users and _limit_tasks() else ["a cap on its processes"]
+    its own processes only (elsewhere it would count every process of the user);
+    ``capped``: a control group caps them already (:mod:`rippleb.engine.process.tasks`)."""
+    capped = (own_users and _limit_tasks()) or capped
+    missing = [] if capped else ["a cap on its processes"]
     if nested_namespace and not _second_user_namespace():
         missing.append("a second user namespace (mounts it cannot undo)")
     if _prctl(PR_SET_NO_NEW_PRIVS, 1) != 0:
@@ -125,11 +127,12 @@ def lock_down(scratch: str | None, nested_namespace: bool, readable=(), own_proc
 
 
 def _limit_tasks() -> bool:
+    """``RLIMIT_NPROC`` at :data:`MAX_TASKS`; False where the kernel does not apply it (root)."""
     try:
         resource.setrlimit(resource.RLIMIT_NPROC, (MAX_TASKS, MAX_TASKS))
     except (OSError, ValueError):
         return False
-    return True
+    return os.getuid() != 0
 
 
 @functools.cache
@@ -228,9 +231,9 @@ def say_missing(sealed: bool) -> None:
     if sealed:
         raise InputError(f"--sealed needs every wall around a method's process, and this kernel does not grant "
                          f"{lacking}; a method could reach the salt: run sealed comparisons where it does "
-                         f"(docs/robustness.md, section 10)")
+                         f"(docs/robustness.md, sections 10 and 11)")
     warnings.warn(f"this kernel does not grant a method's process {lacking}: it can reach more than "
-                  f"docs/robustness.md says (section 10)", RunWarning, stacklevel=3)
+                  f"docs/robustness.md says (sections 10 and 11)", RunWarning, stacklevel=3)
 
 
 def missing_protections() -> tuple[str, ...]:
@@ -253,6 +256,8 @@ def missing_protections() -> tuple[str, ...]:
 
 
 def _probe(write_fd: int) -> None:
+    group = tasks.enter(MAX_TASKS + 1)
+    capped = group is not None
     granted = isolation.new_namespaces()
     missing = [] if granted.pid else ["a user and PID namespace"]
     if granted.pid and not granted.mount:
@@ -263,14 +268,17 @@ def _probe(write_fd: int) -> None:
     if worker == 0:
         if granted.mount:
             missing += isolation.confine_files(())
-        missing += lock_down(None, nested_namespace=granted.mount, own_proc=granted.mount, own_users=granted.pid)
+        missing += lock_down(None, nested_namespace=granted.mount, own_proc=granted.mount, own_users=granted.pid,
+                             capped=capped)
         os.write(write_fd, "\n".join(missing).encode())
         os._exit(0)
     os.close(write_fd)
     os.waitpid(worker, 0)
+    tasks.leave(group)
 
 
 with contextlib.suppress(OSError, AttributeError):   # made in the runner, inherited by every worker
     _filter_program()
+    tasks.pids_root()
     _prctl_call()
     _last_capability()

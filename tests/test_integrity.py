@@ -7,6 +7,7 @@ cache, truth read from the cache, processes left behind, the runner signalled, i
 that hang or exit.
 """
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -164,11 +165,12 @@ NAPPER = textwrap.dedent(f'''
     NAPPING = {NAPPING!r}
 
     class Napper(Method):
-        """Sleeps in its fit (to be interrupted) in a run started with HOSTILE_NAP set, and
-        says so on its log, the one file it may write (issue 34); not in a resumed run."""
+        """Sleeps in its fit (to be interrupted) while a file NAP lies beside its module (it may
+        ask whether a file exists, not read it, and it inherits no environment: issue 41),
+        and says so on its log, the one file it may write (issue 34)."""
         name = "napper"
         def fit(self, calibration):
-            if os.environ.get("HOSTILE_NAP"):
+            if os.path.exists(os.path.join(os.path.dirname(__file__), "NAP")):
                 print(NAPPING, flush=True)
                 time.sleep(3600)
         def step(self, block):
@@ -188,6 +190,17 @@ def site(tmp_path_factory):
     _dist(site, "rippleb-exits", "rippleb_exits", EXITS, {"exits": "Anything"})
     _dist(site, "rippleb-napper", "rippleb_napper", NAPPER, {"napper": "Napper"})
     return site
+
+
+@contextlib.contextmanager
+def nap(site):
+    """The napper sleeps in its fit while this block runs (a file NAP beside its module)."""
+    flag = Path(site) / "NAP"
+    flag.touch()
+    try:
+        yield
+    finally:
+        flag.unlink(missing_ok=True)
 
 
 def napping(out) -> bool:
@@ -315,16 +328,16 @@ def test_a_running_directory_is_locked_and_an_interrupted_one_resumable(site, tm
     args = [sys.executable, "-m", "rippleb", "run", "--methods", "napper,raw", "--scenarios", "static-contact",
             "--seeds", "1", "--jobs", "1", "--no-progress", "--out", str(out)]
     env = _env(site, tmp_path)
-    runner = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                              env={**env, "HOSTILE_NAP": "1"})
-    while not napping(out):    # the napper's fit is running: no row finished
-        assert runner.poll() is None
-        time.sleep(0.02)
-    second = subprocess.run(args[:-2] + ["--resume", str(out)], capture_output=True, text=True,
-                            timeout=120, env=env)
-    assert second.returncode == 2 and "another rippleb run is writing this directory" in second.stderr
-    runner.send_signal(signal.SIGTERM)
-    _, err = runner.communicate(timeout=60)
+    with nap(site):
+        runner = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+        while not napping(out):    # the napper's fit is running: no row finished
+            assert runner.poll() is None
+            time.sleep(0.02)
+        second = subprocess.run(args[:-2] + ["--resume", str(out)], capture_output=True, text=True,
+                                timeout=120, env=env)
+        assert second.returncode == 2 and "another rippleb run is writing this directory" in second.stderr
+        runner.send_signal(signal.SIGTERM)
+        _, err = runner.communicate(timeout=60)
     assert runner.returncode == 130, err
     assert "no row had finished" in err and f"rippleb run --resume {out}" in err
     before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}

@@ -286,7 +286,7 @@ BREAKER = textwrap.dedent(r"""
         raise RuntimeError("HOSTILE " + json.dumps(found, separators=(",", ":")))
 
     class Breaker(Method):
-        """Its targets are parameters: its process inherits no environment (issue 41)."""
+        # its targets are parameters: its process inherits no environment (issue 41)
         name = "breaker"
         def __init__(self, run_dir="", salt=""):
             self.run_dir, self.salt = run_dir, salt

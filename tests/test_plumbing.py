@@ -221,8 +221,8 @@ def test_garbage_in_the_control_pipe_ends_that_job_only(monkeypatch, garbage, sa
     if os.geteuid() == 0 and not sandbox:
         assert finished["attacker"].kind == "garbled", finished["attacker"]
     else:   # the keeper is not dumpable: an unprivileged worker cannot open its pipes
-        assert finished["attacker"] == finished["attacker"].__class__("attacker", "done", b"wrote 0",
-                                                                      finished["attacker"].wall_s)
+        attacker = finished["attacker"]
+        assert attacker == attacker.__class__("attacker", "done", b"wrote 0", attacker.wall_s, attacker.method_s)
 
 
 def test_the_control_parser_never_raises_and_reads_only_what_a_keeper_writes():

@@ -337,13 +337,15 @@ def test_a_method_reads_only_what_it_is_handed_and_reaches_no_network(site, tmp_
 
 
 @pytest.mark.slow
-def test_on_a_scheduler_started_by_hand_a_method_cannot_reach_it(site, tmp_path):
+def test_on_a_scheduler_started_by_hand_a_method_cannot_reach_it(site, tmp_path, monkeypatch):
     """The issue's first row: ``--scheduler`` on a real ``dask scheduler`` and two ``dask
-    worker`` processes; the prober tries ``run_on_scheduler`` on that address (before, its code
-    ran in the scheduler and wrote rows with valid MACs)."""
+    worker`` processes (the plugin installed where they run); the prober tries
+    ``run_on_scheduler`` on that address (before, its code ran in the scheduler and wrote rows
+    with valid MACs)."""
     from test_dask import Cluster
 
     _skip_without_walls()
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]))
     cluster = Cluster(tmp_path, n=2)
     try:
         cluster.wait_for_workers(2)
@@ -431,7 +433,8 @@ def test_a_resumed_sealed_run_hides_the_salt_its_file_and_every_copy(site, tmp_p
     assert found["read"]["salt"] < 0 and found["read"]["salt_copy"] < 0
     _assert_walls_held(found)
     after = _rows(run)["raw"]
-    assert {k: after[k] for k in ("status", "rms_error_nm")} == {k: before[k] for k in ("status", "rms_error_nm")}
+    assert after["status"] == before["status"] == "ok"
+    assert float(after["rms_error_nm"]) == float(before["rms_error_nm"])    # untouched by the resume
 
 
 # ----------------------------------------------------------------------------- check and tune
@@ -474,7 +477,7 @@ def test_a_tuning_point_that_hangs_or_exits_costs_its_own_point(site, monkeypatc
     for point in record["points"]:
         x, (score,) = point["params"]["x"], point["scores"]
         assert (score == float("inf")) == (x > 0.8 or x < 0.2), point
-    assert any("timeout" in e for e in record["errors"]) and any("exit code 3" in e for e in record["errors"])
+    assert any("timeout" in e for e in record["errors"]) and any("exited with code 3" in e for e in record["errors"])
     assert record["default_score"] < float("inf")
 
 

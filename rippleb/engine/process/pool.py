@@ -288,13 +288,13 @@ def _read(run: _Running) -> None:
             if not chunk:
                 setattr(run, f"{name}_eof", True)
                 break
-            if name == "result" and run.sink_fd is not None:
-                if not buf:   # the tag stays here, the rest goes to the file
-                    buf += chunk[:1]
-                    chunk = chunk[1:]
+            if not buf:   # the tag stays here
+                buf += chunk[:1]
+                chunk = chunk[1:]
+            if name == "result" and run.sink_fd is not None and buf[:1] == b"D":   # a result: to its file
                 _write_all(run.sink_fd, chunk)
                 run.sunk += len(chunk)
-            else:
+            else:                                                                 # a one-line error
                 buf += chunk
 
 

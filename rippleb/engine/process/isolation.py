@@ -92,6 +92,7 @@ class Namespaces(NamedTuple):
 #: What :func:`new_namespaces` asks for, best first: ``(unshare flags, what they grant)``.
 NAMESPACE_CHOICES = ((CLONE_NEWUSER | CLONE_NEWPID | CLONE_NEWNS | CLONE_NEWNET, Namespaces(True, True, True)),
                      (CLONE_NEWUSER | CLONE_NEWPID | CLONE_NEWNS, Namespaces(True, True, False)),
+                     (CLONE_NEWUSER | CLONE_NEWPID | CLONE_NEWNET, Namespaces(True, False, True)),
                      (CLONE_NEWUSER | CLONE_NEWPID, Namespaces(True, False, False)))
 NONE = Namespaces(False, False, False)
 

@@ -42,7 +42,7 @@ import threading
 import time
 
 from rippleb import interrupts
-from rippleb.engine.process import isolation
+from rippleb.engine.process import isolation, tasks
 
 _LENGTH = struct.Struct("!Q")
 _PID = struct.Struct("!q")
@@ -152,7 +152,7 @@ def _serve(sock: socket.socket, context, preload) -> None:
             pass
     keepers: set[int] = set()
     while True:
-        keepers.difference_update(isolation.reap_exited())
+        keepers.difference_update(_reaped())
         request = _receive(sock)
         if request is None:
             break
@@ -201,7 +201,7 @@ def _reap_all(keepers: set[int], grace_s: float) -> None:
     """
     deadline = time.monotonic() + grace_s
     while keepers and time.monotonic() < deadline:
-        keepers.difference_update(isolation.reap_exited())
+        keepers.difference_update(_reaped())
         if keepers:
             time.sleep(0.01)
     for pid in keepers:
@@ -210,8 +210,16 @@ def _reap_all(keepers: set[int], grace_s: float) -> None:
                 kill(pid, signal.SIGKILL)
     while True:
         try:
-            os.waitpid(-1, 0)  # every keeper left was killed: each wait returns at once
+            tasks.remove(os.waitpid(-1, 0)[0])  # every keeper left was killed: each wait returns at once
         except ChildProcessError:
             return
         except InterruptedError:
             continue
+
+
+def _reaped() -> list[int]:
+    """The keepers that have exited, reaped, their process groups removed."""
+    pids = isolation.reap_exited()
+    for pid in pids:
+        tasks.remove(pid)
+    return pids

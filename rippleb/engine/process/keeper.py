@@ -96,7 +96,6 @@ def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output, confine=None) -> N
         else:
             isolation.end_descendants()
         log.close()   # the log is whole before the runner hears the job ended
-        tasks.leave(group)
         if made:
             _remove(scratch)
         _write_all(ctrl_w, f"{os.waitstatus_to_exitcode(status)} {clock.span_ns()}\n".encode())

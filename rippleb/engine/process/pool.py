@@ -37,6 +37,7 @@ import time
 from dataclasses import dataclass, field
 
 from rippleb import interrupts
+from rippleb.engine.process.joblog import write_all
 from rippleb.engine.process.keeper import Bound, keeper
 from rippleb.engine.process.reaping import EXITING, KEEPER_GRACE_S, kill_keeper, reap_exiting, wait_keeper
 
@@ -292,16 +293,10 @@ def _read(run: _Running) -> None:
                 buf += chunk[:1]
                 chunk = chunk[1:]
             if name == "result" and run.sink_fd is not None and buf[:1] == b"D":   # a result: to its file
-                _write_all(run.sink_fd, chunk)
+                write_all(run.sink_fd, chunk)
                 run.sunk += len(chunk)
             else:                                                                 # a one-line error
                 buf += chunk
-
-
-def _write_all(fd: int, data: bytes) -> None:
-    view = memoryview(data)
-    while view:
-        view = view[os.write(fd, view):]
 
 
 def _kill_workers(runs: list[_Running], wait_s: float = 1.0) -> None:

@@ -14,6 +14,8 @@ import os
 import signal
 import time
 
+from rippleb.engine.process import tasks
+
 KEEPER_GRACE_S = 5.0
 
 
@@ -31,6 +33,7 @@ def reap_exiting(block: bool = False) -> None:
     for pid, deadline in EXITING:
         try:
             if os.waitpid(pid, os.WNOHANG)[0]:
+                tasks.remove(pid)
                 continue
         except ChildProcessError:  # reaped already
             continue
@@ -55,6 +58,7 @@ def wait_keeper(keeper: int, grace_s: float = KEEPER_GRACE_S) -> None:
     if not pid:  # the keeper did not finish its cleanup in time: end its whole session
         kill_keeper(keeper)
         os.waitpid(keeper, 0)  # SIGKILL cannot be caught: this returns at once
+    tasks.remove(keeper)
 
 
 def kill_keeper(keeper: int) -> None:

@@ -252,12 +252,12 @@ def missing_protections() -> tuple[str, ...]:
     with os.fdopen(read_fd, "rb") as fh:
         found = fh.read().decode()
     os.waitpid(pid, 0)
+    tasks.remove(pid)
     return tuple(line for line in found.splitlines() if line)
 
 
 def _probe(write_fd: int) -> None:
-    group = tasks.enter(MAX_TASKS + 1)
-    capped = group is not None
+    capped = tasks.enter(MAX_TASKS + 1) is not None
     granted = isolation.new_namespaces()
     missing = [] if granted.pid else ["a user and PID namespace"]
     if granted.pid and not granted.mount:
@@ -274,11 +274,12 @@ def _probe(write_fd: int) -> None:
         os._exit(0)
     os.close(write_fd)
     os.waitpid(worker, 0)
-    tasks.leave(group)
 
 
-with contextlib.suppress(OSError, AttributeError):   # made in the runner, inherited by every worker
+with contextlib.suppress(OSError, AttributeError, ImportError):   # made in the runner, inherited by every worker
     _filter_program()
     tasks.pids_root()
+    landlock.library_paths()
+    landlock.abi()
     _prctl_call()
     _last_capability()

@@ -11,8 +11,10 @@ memory limit, which binds each process alone. Two of the kernel's mechanisms cap
   namespace, so in the worker's own it counts the job's processes alone; the kernel does
   not apply it to root (``INIT_USER``), which is where the group is there instead.
 
-The keeper leaves its group and removes it once the job's processes are gone (a keeper
-killed before that leaves an empty group, removed by the next keeper of this process).
+The keeper stays in its group to the end; the process that reaps it removes the group
+(:func:`remove`). Moving a process into a group is the costly step (an RCU grace period on a
+cgroup v1 hierarchy: 14 ms measured, ``benchmarks/confine_overhead.py --steps``), so each job
+moves once, and where ``RLIMIT_NPROC`` binds (any user but root) no group is made at all.
 """
 
 from __future__ import annotations
@@ -65,15 +67,14 @@ def _enabled(group: str, controller: str) -> bool:
 def enter(limit: int) -> str | None:
     """Move this process into a new group that holds at most ``limit`` processes and threads,
     it included; returns the group's directory, or None where no ``pids`` hierarchy is
-    writable (then only ``RLIMIT_NPROC`` caps the job)."""
+    writable or where ``RLIMIT_NPROC`` caps the job already (a user other than root)."""
     root = pids_root()
-    if root is None:
+    if root is None or os.getuid() != 0:
         return None
-    _remove_stale(root)
     group = os.path.join(root, f"{PREFIX}{os.getpid()}")
     try:
         os.mkdir(group)
-    except FileExistsError:
+    except FileExistsError:   # a group left by a process of this PID before: emptied when it was reaped
         pass
     except OSError:
         return None
@@ -87,33 +88,12 @@ def enter(limit: int) -> str | None:
     return group
 
 
-def leave(group: str | None) -> None:
-    """Move this process back to the group it came from and remove the job's group (empty
-    once the job's processes are gone)."""
-    if group is None:
-        return
-    with contextlib.suppress(OSError):
-        _write(os.path.join(os.path.dirname(group), "cgroup.procs"), str(os.getpid()))
-        os.rmdir(group)
-
-
-def _remove_stale(root: str) -> None:
-    """Remove the empty groups of keepers that were killed before they could."""
-    with contextlib.suppress(OSError):
-        for name in os.listdir(root):
-            if name.startswith(PREFIX) and not _alive(name[len(PREFIX):]):
-                with contextlib.suppress(OSError):
-                    os.rmdir(os.path.join(root, name))
-
-
-def _alive(pid: str) -> bool:
-    try:
-        os.kill(int(pid), 0)
-    except (ValueError, ProcessLookupError):
-        return False
-    except PermissionError:
-        return True
-    return True
+def remove(pid: int) -> None:
+    """Remove the group of the keeper ``pid``, just reaped (empty: everything in it has ended)."""
+    root = pids_root()
+    if root is not None:
+        with contextlib.suppress(OSError):
+            os.rmdir(os.path.join(root, f"{PREFIX}{pid}"))
 
 
 def _write(path: str, text: str) -> None:

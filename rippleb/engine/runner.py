@@ -50,8 +50,9 @@ from rippleb.engine.process.pool import Pool
 from rippleb.registry import Registry
 from rippleb.engine.executors import row_tasks
 from rippleb.engine.methods import base_name, resolve_methods
-from rippleb.engine.results import ResultsFile, row_key, say_other_versions, warn_native_numerics, warn_native_rows
-from rippleb.engine.rows import (CALIBRATION, FITTING, MAX_SEEDS, SCORED, Case, RowKey, scenario_hash,
+from rippleb.engine.results import (MEASURED, ResultsFile, RunWarning, row_key, say_other_versions,
+                                    warn_native_numerics, warn_native_rows)
+from rippleb.engine.rows import (CALIBRATION, FITTING, MAX_SEEDS, SCORED, Case, RowKey, check_rows, scenario_hash,
                                  select_conditions, select_scenarios, select_seeds, split_names)
 from rippleb.engine.rundir import log_dir, read_config, run_dir
 from rippleb.engine.scheduler import Plan, State, prepare_cases, progress_bar, record, say_retried, schedule
@@ -131,6 +132,9 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, s
         check_scenario(scenario)
     condition_list = select_conditions(conditions)
     seed_list = select_seeds(seeds, seed_start)
+    check_rows(len(names) * len(scenario_objs) * len(condition_list) * len(seed_list),
+               f"{len(names)} methods x {len(scenario_objs)} scenarios x {len(condition_list)} conditions x "
+               f"{len(seed_list)} seeds")
     calibration = load_scenario(CALIBRATION)
     config = {"methods": names, "conditions": condition_list, "seeds": seed_list,
               "scenarios": [str(Path(s).resolve()) if s.endswith(".toml") else s for s in
@@ -156,14 +160,19 @@ def run_resolved(registry: Registry, names: list[str], entries: list[tuple], con
     """
     warn_native_numerics()
     plan = Plan(calibration_label=CALIBRATION)
+    # each content hash once, not per seed: hashing a scenario takes milliseconds, and a plan
+    # at MAX_SEEDS hashed 160 000 of them (over 10 minutes) before it started
+    hashed: dict[int, str] = {}
+    entries = [(scenario, calibration, extra, *(hashed.setdefault(id(s), scenario_hash(s))
+                                                for s in (scenario, calibration)))
+               for scenario, calibration, extra in entries]
     for seed in seeds:
-        for scenario, calibration, extra in entries:
-            content = scenario_hash(scenario)
+        interrupts.check_interrupted()   # a plan of many rows takes seconds: Ctrl-C stops it
+        for scenario, calibration, extra, content, cal_content in entries:
             for condition in conditions:
                 # the device's first session; under a condition of the joint itself
                 # (`realistic`) that session has the joint's physics too
-                cal_case = Case(CALIBRATION, scenario_hash(calibration), calibration_condition(condition),
-                                seed, FITTING)
+                cal_case = Case(CALIBRATION, cal_content, calibration_condition(condition), seed, FITTING)
                 plan.add_sim(calibration, cal_case)
                 case = Case(scenario.name, content, condition, seed, SCORED)
                 plan.add_sim(scenario, case)

@@ -9,6 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
+from rippleb.printable import escaped
+
+
 def _amplitude(x: np.ndarray) -> np.ndarray:
     window = np.hanning(len(x))
     return 2.0 * np.abs(np.fft.rfft((x - x.mean()) * window)) / window.sum()
@@ -31,7 +34,14 @@ _OTHER_COLORS = ("tab:olive", "tab:gray", "tab:pink", "k")
 def style(method: str, index: int = 0) -> dict:
     """matplotlib keyword arguments of ``method``'s line."""
     color, ls = METHOD_STYLE.get(method, (_OTHER_COLORS[index % len(_OTHER_COLORS)], "-"))
-    return {"color": color, "ls": ls, "label": method}
+    return {"color": color, "ls": ls, "label": plot_text(method)}
+
+
+def plot_text(value) -> str:
+    """A name (a method's label, a scenario's) as matplotlib text: matplotlib reads text
+    between two ``$`` as mathtext, and a name that is not valid mathtext (``$\\x$``) stopped
+    the whole report with a ParseFatalException; an escaped ``\\$`` is a dollar sign."""
+    return escaped(value).replace("$", r"\$")
 
 
 @dataclass
@@ -104,10 +114,13 @@ def _pyplot():
     return plt
 
 
-def _save(fig, out_png) -> Path:
+def _save(fig, out_png, dpi: int = 110) -> Path:
+    from rippleb.files import atomic_path
+
     out = Path(out_png)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
+    with atomic_path(out) as tmp:   # replaced, never written through (a link there is replaced)
+        fig.savefig(tmp, dpi=dpi)
     fig.clf()
     _pyplot().close(fig)
     return out

@@ -8,6 +8,7 @@ it cannot follow. No number is typed here. A plugin gets the computed part only.
 
 from __future__ import annotations
 
+from rippleb.printable import markdown_code as code
 from rippleb.report.stats import fmt_interval, method_order
 from rippleb.report.tables import condition_summary
 
@@ -54,6 +55,11 @@ MECHANISMS = {
                    "harmonics and leaks into the weights, which then hold it at rest; it runs in the "
                    "wrong frame until the first index pulse after a power cycle, and cannot follow "
                    "orders it does not list or components locked to the output",
+    "gain-tuned": "per-channel gains tuned on the calibration log to null what the gauges' placement "
+                  "leaves at the wave-generator orders: with one bridge there is nothing to tune and it is "
+                  "its inner method (raw); with several channels it cannot tell that ripple from real "
+                  "torque the calibration's reference misses at the same orders, and it holds the "
+                  "calibration's gains through whatever changes the gauges since (re-assembly)",
     "periodic-dob": "a comb over one turn of the encoder angle, any ripple shape, learned on the "
                     "strain minus a low-passed torque: it holds at rest and needs no order list, but "
                     "learns slowly (the load dependence and a changed ripple take many turns), "
@@ -77,13 +83,13 @@ def method_verdicts(frame, column: str = "rms_error_nm", reference: str = "same-
         rows = table[table["method"] == method].set_index("condition")
         best, worst = rows["mean"].idxmin(), rows["mean"].idxmax()
         wins = [c for c in rows.index if rows.loc[c, "rank"] == 1]
-        text = f"`{method}`: " + (f"lowest mean under {', '.join(f'`{c}`' for c in wins)}; " if wins else "")
+        text = f"{code(method)}: " + (f"lowest mean under {', '.join(code(c) for c in wins)}; " if wins else "")
         if len(rows) == 1:   # one condition: where it ranks there
-            text += (f"rank {rows.loc[best, 'rank']} of {n_methods[best]} under `{best}` "
+            text += (f"rank {rows.loc[best, 'rank']} of {n_methods[best]} under {code(best)} "
                      f"({fmt_interval(rows.loc[best, 'mean'], rows.loc[best, 'half'])})")
         else:
-            text += (f"best under `{best}` ({fmt_interval(rows.loc[best, 'mean'], rows.loc[best, 'half'])}, "
-                     f"rank {rows.loc[best, 'rank']} of {n_methods[best]}), worst under `{worst}` "
+            text += (f"best under {code(best)} ({fmt_interval(rows.loc[best, 'mean'], rows.loc[best, 'half'])}, "
+                     f"rank {rows.loc[best, 'rank']} of {n_methods[best]}), worst under {code(worst)} "
                      f"({fmt_interval(rows.loc[worst, 'mean'], rows.loc[worst, 'half'])}, rank "
                      f"{rows.loc[worst, 'rank']} of {n_methods[worst]})")
         if reference in rows.index and mismatch in rows.index:

@@ -1,14 +1,13 @@
 """``rippleb report``: the comparison of a run, generated from its ``results.csv``.
 
-``rippleb report DIR [--out OUT] [--published] [--html]`` writes ``README.md`` (the
-method x condition summary and headline, then per condition the method x scenario
-matrices as mean and 95 % t-interval over seeds, the timing table, a ranking per scenario
-and the paper's Table I replica; the rows that did not finish ok; provenance), every row
-as ``results.csv``, ``provenance.json``, the figures of :mod:`rippleb.report.figures` and, with
-``--html``, the interactive ``index.html`` of :mod:`rippleb.report.html_report`.
-
-Tables live in :mod:`rippleb.report.tables`, statistics in :mod:`rippleb.report.stats`, provenance in
-:mod:`rippleb.report.provenance`; this module reads the rows and writes the files. The names
+``rippleb report DIR [--out OUT] [--published] [--html]`` writes ``README.md`` (the method x
+condition summary and headline, the gauge layouts of a layout sweep, then per condition the
+method x scenario matrices as mean and 95 % t-interval over seeds, the timing table, a ranking
+per scenario and the paper's Table I replica; the rows that did not finish ok; provenance),
+every row as ``results.csv``, ``provenance.json``, the figures of :mod:`rippleb.report.figures`
+and, with ``--html``, the interactive ``index.html`` of :mod:`rippleb.report.html_report`.
+Tables live in :mod:`rippleb.report.tables`, statistics in :mod:`rippleb.report.stats`, provenance
+in :mod:`rippleb.report.provenance`; this module reads the rows and writes the files. The names
 used by earlier versions of this module are re-exported here.
 """
 
@@ -21,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from rippleb.errors import InputError
-from rippleb.files import atomic_path
+from rippleb.files import atomic_path, refuse_links
 from rippleb.report.provenance import (collect_provenance, environment_sentence, environment_warnings, git_state,
                                        provenance_markdown,  # noqa: F401
                                        read_run_provenance, seeds_text)
@@ -29,6 +28,7 @@ from rippleb.scoring.metrics import METRIC_COLUMNS
 from rippleb.scoring.truthfree import TRUTH_FREE_COLUMNS
 from rippleb.engine.results import RunWarning, copy_rows, row_key, swept_columns
 from rippleb.engine.sealing import sealed_text
+from rippleb.report.layouts_section import layouts_markdown
 from rippleb.report.tuning_table import tuning_markdown
 from rippleb.report.verdicts import method_verdicts
 from rippleb.report.stats import (CONFIDENCE, METHOD_ORDER, fmt_interval, interval_frame,  # noqa: F401
@@ -48,7 +48,7 @@ def load_rows(run_dir):
 
     run_dir = Path(run_dir)
     path = run_dir / "results.csv"
-    if not path.is_file():
+    if not (path.is_symlink() or path.exists()):   # a link, a FIFO: the reader says what it is
         raise InputError(f"{run_dir}: no results.csv (is this a rippleb run directory?)")
     results = ResultsFile(None)
     results.rows = verified_rows(run_dir, read_rows(path), path)
@@ -103,7 +103,7 @@ def tables_markdown(frame) -> str:
              "that condition; then mean ± 95 % t-interval over seeds.", "",
              condition_summary_markdown(frame), ""]
     parts += [f"- {s}" for s in condition_headline(frame)] + [""]
-    parts += _gear_section(frame)
+    parts += _gear_section(frame) + layouts_markdown(frame)
     verdicts = method_verdicts(frame)
     if verdicts:
         parts += ["### Each method in plain words", "",
@@ -138,17 +138,21 @@ def _gear_section(frame) -> list[str]:
 def _condition_section(condition: str, rows, source: str) -> list[str]:
     from rippleb.simulator.conditions import CONDITIONS
 
+    from rippleb.printable import markdown_code, markdown_text
+
     what = CONDITIONS.get(condition, "not a built-in condition")
-    parts = [f"## Condition `{condition}`: {what}", ""]
+    parts = [f"## Condition {markdown_code(condition)}: {what}", ""]
     parts += [f"- {s}" for s in headline_sentences(rows)] + [""]
     for column, (title, unit) in MATRIX_COLUMNS.items():
         if column in rows and rows[column].notna().any():  # older rows, or n/a everywhere
-            parts += [f"### `{column}`: {title} [{unit}] ({condition})", "", matrix_markdown(rows, column), ""]
+            parts += [f"### `{column}`: {title} [{unit}] ({markdown_text(condition)})", "",
+                      matrix_markdown(rows, column), ""]
     if "us_per_tick_p99" in rows:
-        parts += [f"### Compute time of one control tick, p50 / p99 [us] ({condition})", "",
+        parts += [f"### Compute time of one control tick, p50 / p99 [us] ({markdown_text(condition)})", "",
                   timing_markdown(rows), ""]
-    parts += [f"### Ranking per scenario by `rms_error_nm` ({condition})", "", ranking_markdown(rows), ""]
-    parts += [f"### The paper's Table I, replicated ({condition})", "", table_one_markdown(rows, source), ""]
+    parts += [f"### Ranking per scenario by `rms_error_nm` ({markdown_text(condition)})", "", ranking_markdown(rows), ""]
+    parts += [f"### The paper's Table I, replicated ({markdown_text(condition)})", "",
+              table_one_markdown(rows, source), ""]
     return parts
 
 
@@ -321,8 +325,11 @@ def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, arg
     """
     run_dir = Path(run_dir)
     frame = load_rows(run_dir)
+    if out is None:   # the run directory's own entry: never a link (one to elsewhere would take the report there)
+        refuse_links(run_dir, ["report"])
     out = Path(out) if out is not None else run_dir / "report"
     _mkdir(out)
+    refuse_links(out, REPORT_ENTRIES, also_in="figures")
     try:
         return _write_report(run_dir, out, frame, figures=figures, figure_seed=figure_seed, argv=argv,
                              published=published, html=html, figure_format=figure_format,
@@ -375,6 +382,10 @@ def _write_report(run_dir: Path, out: Path, frame, *, figures, figure_seed, argv
                           signals=signals)
     return {"readme": out / "README.md", "csv": out / "results.csv", "provenance": out / "provenance.json",
             "html": page, "figures": {k: v[0] for k, v in drawn.items()}, "warnings": warnings}
+
+
+#: What ``rippleb report`` writes in its directory; none may be a symbolic link (nor anything in figures/).
+REPORT_ENTRIES = ("README.md", "results.csv", "provenance.json", "index.html", "figures")
 
 
 def _mkdir(path: Path) -> None:

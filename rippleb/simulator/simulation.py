@@ -28,15 +28,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from rippleb.data import JointSpec, SensorLog
+from rippleb.layouts import GaugeSettings
 from rippleb.scenario import Scenario, load_scenario
 from rippleb.simulator import conditions, controller
 from rippleb.mismatch import describe
 from rippleb.simulator.conditions import DEFAULT_CONDITION, calibration_condition, check_condition, stable_hash
 from rippleb.simulator.device import Device, check_seed
+from rippleb.simulator.flexspline import channel_devices
 from rippleb.simulator.encoder import EncoderErrors, counts, missed_counts
 from rippleb.simulator.joint import load_table
-from rippleb.simulator.sensors import current_sense, dropouts, encoder_faults, strain_bridge
-from rippleb.simulator.transmission import IDEAL as IDEAL_GEAR, TransmissionError
+from rippleb.simulator.sensors import current_sense, dropouts, encoder_faults, gauge_channels
+from rippleb.simulator.transmission import IDEAL as IDEAL_GEAR, TransmissionError, structural_damping
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,6 +67,10 @@ class Simulation:
         What that error adds to ``torque_true`` [Nm]: the real torque of this joint minus
         that of the same joint with an ideal gear (zero when the error is off; None for an
         unscored session, the calibration, where no row is scored).
+    gauges
+        Per amplifier channel of the gauge layout, the device as that channel reads it (its
+        ripple terms are the channel's; :mod:`rippleb.simulator.flexspline`): ``gauges[0]``
+        is the bridge of a one-channel layout.
     """
 
     log: SensorLog
@@ -76,6 +82,7 @@ class Simulation:
     device: Device
     gear: TransmissionError = IDEAL_GEAR
     torque_gear: np.ndarray | None = None
+    gauges: tuple = ()
 
 
 def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_CONDITION) -> Simulation:
@@ -109,11 +116,14 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     knobs = sc.unmodelled.resolve(realistic=session.realistic)
     errors = EncoderErrors.draw(seed, knobs, spec.counts_per_rev)
     gains = controller.design_gains(spec, float(np.mean(nominal.inertia)), knobs.bandwidth_factor)
-    gear = TransmissionError.draw(seed, sc.transmission_error)
+    gear = TransmissionError.draw(seed, sc.transmission_error, sc.order2_share, order4=knobs.order4_error,
+                                  load=knobs.load_error, compliance=knobs.compliance_variation,
+                                  rated_torque=spec.rated_torque)
     table = load_table(sc, q_d)
     loop = (spec, device, sc.temperature_c, table, gains, t, trajectory, tau_ref - _excitation(sc, t),
             sc.external_torque(t))
-    q, qd, theta_m, _, tau_true, commanded = controller.run(*loop, encoder=errors, gear=gear)
+    drive = dict(encoder=errors, damping=structural_damping(knobs.loss_factor, table))
+    q, qd, theta_m, _, tau_true, commanded = controller.run(*loop, gear=gear, **drive)
     # What the gear's error adds to the real torque (the metrics' "erased" columns; never
     # streamed to a method): this joint against the same joint with an ideal gear, each
     # under its own loop (docs/metrics.md, "What a method erased", says what else the
@@ -123,11 +133,12 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     if not sc.scored:
         torque_gear = None
     elif gear.active:
-        torque_gear = tau_true - controller.run(*loop, encoder=errors)[4]
+        torque_gear = tau_true - controller.run(*loop, **drive)[4]
     else:
         torque_gear = np.zeros(n)
 
-    strain = strain_bridge(device, sc, t, theta_m, tau_true, noise, output_angle=q, knobs=knobs)
+    gauges = tuple(channel_devices(device, sc.gauges, sc.temperature_c, session.rebonded))
+    strain, channels = gauge_channels(gauges, sc, t, theta_m, tau_true, noise, output_angle=q, knobs=knobs)
     current = current_sense(sc, commanded, device.current_offset, noise)
     absolute = counts(theta_m, spec.counts_per_rev, errors)
     index = conditions.index_pulses(absolute, conditions.index_count(seed, spec.counts_per_rev),
@@ -141,22 +152,25 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
             "condition": condition if sc.scored else calibration_condition(condition)}
     if knobs.active:
         meta["unmodelled"] = describe(knobs)
+    if sc.gauges != GaugeSettings():
+        meta["gauges"] = dataclasses.asdict(sc.gauges)
     if sc.faults.active:
         # Own generator: a faulty scenario's healthy signals stay those of the same
         # scenario without faults, and scenarios without faults are untouched.
         fault_rng = np.random.default_rng(
             np.random.SeedSequence([seed, stable_hash(sc.name), stable_hash("faults")]))
         encoder = encoder_faults(encoder, sc.faults, spec.fs, fault_rng)
-        strain, encoder, current, index = dropouts((strain, encoder, current, index), sc.faults,
-                                                    spec.fs, fault_rng)
+        levels = (strain, encoder, current) if channels is None else (strain, encoder, current, channels)
+        strain, encoder, current, *kept, index = dropouts((*levels, index), sc.faults, spec.fs, fault_rng)
+        channels = kept[0] if kept else None
         meta["faults"] = {k: v for k, v in dataclasses.asdict(sc.faults).items() if v}
 
     log = SensorLog(spec=spec, t=t, strain=strain, encoder=encoder, current=current, index=index,
-                    torque_true=tau_true, torque_ref=tau_ref, meta=meta)
+                    channels=channels, torque_true=tau_true, torque_ref=tau_ref, meta=meta)
     start, stop = sc.evaluation
     return Simulation(log=log, moving=np.abs(qd_d) > 1e-12, wave_angle=theta_m,
                       joint_velocity=qd, eval_mask=(t >= start) & (t <= stop),
-                      scenario=sc, device=device, gear=gear, torque_gear=torque_gear)
+                      scenario=sc, device=device, gear=gear, torque_gear=torque_gear, gauges=gauges)
 
 
 def _excitation(sc: Scenario, t: np.ndarray) -> np.ndarray:

@@ -4,8 +4,8 @@ Every method gets the same budget of calibration evaluations, on the ``calibrati
 scenario of the tuning devices only, scored against ``torque_ref``; the record (JSON, one
 entry per method, written as each finishes) says every point tried, its score on each
 device, the best point and whether the rule lets it replace the default. The built-ins'
-record is ``methods/tuning.json`` (docs/tuning.md). Methods run in this process's
-workers, unsandboxed, as ``rippleb check`` runs them: tune only methods you trust.
+record is ``methods/tuning.json`` (docs/tuning.md). Each point runs as a run's rows do, in
+the method's sandboxed worker under the run's default limits (:mod:`rippleb.engine.tuner`).
 """
 
 from __future__ import annotations

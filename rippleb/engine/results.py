@@ -343,3 +343,28 @@ def _check_row(header: list[str], cells: list[str]) -> tuple[dict, str | None]:
     if row["status"] == "ok" and not any(math.isfinite(row.get(c, math.nan)) for c in SCORE_COLUMNS):
         return row, "is 'ok' without an RMS error or a truth-free score"
     return row, None
+
+
+def warn_native_numerics() -> None:
+    """One line when this process cannot give rows that re-run to the last bit elsewhere."""
+    from rippleb import numerics
+
+    state = numerics.state()
+    if state != numerics.PORTABLE:
+        why = (f"{numerics.NATIVE_SWITCH} is set" if numerics.native_requested()
+               else "numpy was imported before rippleb")
+        warnings.warn(RunWarning(f"the rows run the host's own numeric paths ({state}; {why}): "
+                                 "they may differ in their last bits from the same rows on another "
+                                 "CPU (docs/reproducibility.md)"), stacklevel=3)
+
+
+def warn_native_rows(rows: list[dict]) -> None:
+    """One line when rows that ran elsewhere (Dask workers) used their host's own paths."""
+    from rippleb import numerics
+
+    native = [row["numerics"] for row in rows if row.get("numerics", numerics.PORTABLE) != numerics.PORTABLE]
+    if native:
+        warnings.warn(RunWarning(f"{len(native)} rows ran on workers with their host's own numeric "
+                                 f"paths ({native[0]}): start 'dask worker' with the variables of "
+                                 "docs/scale.md so that they re-run to the last bit elsewhere"),
+                      stacklevel=3)

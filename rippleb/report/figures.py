@@ -21,8 +21,7 @@ from rippleb.report.error_figures import (COST_FIGURE_LABELS, error_by_speed,  #
                                           plot_error_vs_speed, plot_residual_spectra, plot_restart_zoom,
                                           residual_spectra, speed_edges)
 from rippleb.report.plotting import (METHOD_STYLE, MOTION_EDGE_LABEL, SIGNAL_SCENARIOS, ScenarioSignals,  # noqa: F401
-                                     _amplitude, _motion_edges, _pyplot, _save, fit_methods, plot_text, stream_methods,
-                                     style)
+                                     _amplitude, _motion_edges, _pyplot, _save, plot_text, restream, style)
 
 #: Wave-generator speeds of the Fig. 2 replica [rev/s]: slow to brisk motor speeds.
 DEFAULT_SPEEDS = (1.0, 2.0, 4.0, 6.0, 8.0)
@@ -330,15 +329,9 @@ def _cost_figure_column(ok) -> str | None:
 
 
 def _signals_of_seed(methods, scenarios, seed: int) -> tuple[dict, list]:
-    """Fit ``methods`` on the calibration log of ``seed`` and stream each scenario."""
-    fitted, errors = fit_methods(methods, seed)
-    warnings = [f"figures: {m} not drawn on seed {seed}, fit failed: {e}" for m, e in errors.items()]
-    signals = {}
-    for scenario in scenarios:
-        signals[scenario] = stream_methods(fitted, scenario, seed)
-        warnings += [f"figures: {m} not drawn on {scenario} seed {seed}: {e}"
-                     for m, e in signals[scenario].errors.items()]
-    return signals, warnings
+    """Fit ``methods`` on the calibration log of ``seed`` and stream each scenario, in the
+    methods' sandboxed workers (:func:`rippleb.report.plotting.restream`)."""
+    return restream(methods, scenarios, seed)
 
 
 def _check_against_rows(sig: ScenarioSignals, ok, scenario: str, seed: int) -> list[str]:

@@ -349,11 +349,10 @@ def _restart_figure(frame, seed, signals):
     if seed is None or "stop-restart" not in set(ok["scenario"]):
         return None
     sig = (signals or {}).get("stop-restart")
-    if sig is None:
-        from rippleb.report.figures import fit_methods, stream_methods
+    if sig is None:   # re-streamed in the methods' sandboxed workers, as the figures are
+        from rippleb.report.plotting import restream
 
-        fitted, _ = fit_methods(method_order(ok["method"].unique()), seed)
-        sig = stream_methods(fitted, "stop-restart", seed)
+        sig = restream(method_order(ok["method"].unique()), ["stop-restart"], seed)[0]["stop-restart"]
     log = sig.sim.log
     every = max(1, int(round(log.spec.fs / log.spec.control_rate)))
     pick = slice(every - 1, None, every)

@@ -310,15 +310,18 @@ def restart_max_error(estimate: np.ndarray, truth: np.ndarray | None, truth_info
     return worst
 
 
-def tick_stats(ticks_ns: np.ndarray, n_samples: int) -> dict[str, float]:
+def tick_stats(ticks_ns: np.ndarray, n_samples: int, method_s: float | None = None) -> dict[str, float]:
     """``us_per_tick_p50``, ``us_per_tick_p99``: percentiles of the ``step`` times [us];
-    ``samples_per_s = n_samples / sum(step times)``.
+    ``samples_per_s``: ``n_samples`` over the method's time on the row as measured outside
+    its process (``method_s``: loading its fitted state, ``reset``, every ``step``, handing
+    back the estimate; :mod:`rippleb.engine.process.keeper`), or, in a process of one's own
+    (tests, tools), over the sum of the step times.
     """
     if len(ticks_ns) == 0:
         return {"us_per_tick_p50": float("nan"), "us_per_tick_p99": float("nan"),
                 "samples_per_s": float("nan")}
     us = ticks_ns / 1000.0
-    total_s = float(np.sum(ticks_ns)) / 1e9
+    total_s = float(np.sum(ticks_ns)) / 1e9 if method_s is None else method_s
     return {"us_per_tick_p50": float(np.percentile(us, 50)),
             "us_per_tick_p99": float(np.percentile(us, 99)),
             "samples_per_s": n_samples / total_s if total_s > 0 else float("inf")}

@@ -18,7 +18,7 @@ READING_SIMULATED = """## Reading these tables
   torque at orders 1 and 2, the ripple's own, through the joint's dynamics
   (`docs/physics.md`, "Transmission error"). `torque_ref` does not know it. A method that
   removes everything at those orders removes it too and is charged for it in
-  `rms_error_nm`; `gear_erased_fraction` and `rms_error_without_gear_nm` say what each
+  `rms_error_nm`; `gear_removed_fraction` and `rms_error_without_gear_nm` say what each
   method did with it.
 - `realistic` is the same joint as `same-session` with the physics no method models turned on
   at their documented sizes, in the calibration session too: gauge dynamics that change the

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rippleb.printable import markdown_code as md_code, markdown_text as md_text
 from rippleb.report.paired import CORRECTION, PairedTest, paired_tests
 from rippleb.report.stats import fmt_interval, t_interval
 
@@ -90,7 +91,7 @@ class Claim:
 
     def sentence(self) -> str:
         """The claim in full: who leads where, both tests, and what it is."""
-        a, b, d = f"`{self.first}`", f"`{self.second}`", self.discovery
+        a, b, d = md_code(self.first), md_code(self.second), self.discovery
         on = f"on the {d.n} discovery devices ({DISCOVERY[0]})"
         if self.status == "unknown":
             return (f"{a} has the lowest mean {self.where} ahead of {b}; fewer than two discovery "
@@ -108,11 +109,11 @@ class Claim:
     def cell(self) -> str:
         """The claim in one table cell: its status, who, and the devices and p-values."""
         d, r = self.discovery, self.replication
-        first = (f"{self.first} lower than {self.second} on {d.wins}/{d.n} {DISCOVERY[0]} "
+        first = (f"{md_text(self.first)} lower than {md_text(self.second)} on {d.wins}/{d.n} {DISCOVERY[0]} "
                  f"(p = {_p(d)})")
         if self.status in ("unknown", "not separated"):
             return f"{self.status}: {first}"
-        return (f"{self.status}: {self.first} leads {self.second}, lower on {d.wins}/{d.n} {DISCOVERY[0]} "
+        return (f"{self.status}: {md_text(self.first)} leads {md_text(self.second)}, lower on {d.wins}/{d.n} {DISCOVERY[0]} "
                 f"(p = {_p(d)}) and {r.wins}/{r.n} {REPLICATION[0]} (one-sided p = {_p(r)})")
 
     def means_text(self) -> str:
@@ -133,7 +134,8 @@ def claim_family(groups) -> list[Claim]:
     ----------
     groups
         ``[(key, where, values), ...]``: ``key`` names the group (a condition, a scenario),
-        ``where`` says it in words (``under `aged```), ``values`` is a pandas Series of one error per method and
+        ``where`` says it in Markdown (``under `aged```, names written by
+        :func:`~rippleb.printable.markdown_code`), ``values`` is a pandas Series of one error per method and
         device, indexed by ``(method, seed)``. A group with fewer than two methods makes no
         claim and is left out.
 

@@ -10,6 +10,7 @@ one are ``same-session``.
 
 from __future__ import annotations
 
+from rippleb.printable import markdown_code as md_code, markdown_text as md_text
 from rippleb.report.claims import claim_family, headlines
 from rippleb.report.markdown import markdown, plural
 from rippleb.report.stats import (condition_order, fmt_interval, method_order, per_seed_mean_over_scenarios,
@@ -63,12 +64,12 @@ def condition_summary_markdown(frame, column: str = "rms_error_nm") -> str:
     conditions = condition_order(table["condition"].unique())
     cells = {(r.condition, r.method): fmt_interval(r.mean, r.half) for r in table.itertuples()}
     worst = table.dropna(subset=["mean"]).sort_values("mean").groupby("method").last()
-    rows = [[m] + [cells.get((c, m), "n/a") for c in conditions]
-            + ([f"{fmt_interval(worst.loc[m, 'mean'], worst.loc[m, 'half'])} ({worst.loc[m, 'condition']})"
+    rows = [[md_text(m)] + [cells.get((c, m), "n/a") for c in conditions]
+            + ([f"{fmt_interval(worst.loc[m, 'mean'], worst.loc[m, 'half'])} ({md_text(worst.loc[m, 'condition'])})"
                 if m in worst.index else "n/a"] if len(conditions) > 1 else [])
             for m in method_order(table["method"].unique())]
     counts = table.groupby("condition")["scenarios"].first()
-    heads = [f"{c} ({plural(int(counts[c]), 'scenario')})" for c in conditions]
+    heads = [f"{md_text(c)} ({plural(int(counts[c]), 'scenario')})" for c in conditions]
     return markdown(rows, ["method"] + heads + (["worst case over the conditions"] if len(conditions) > 1 else []))
 
 
@@ -79,7 +80,7 @@ def condition_claims(frame, column: str = "rms_error_nm"):
     groups = []
     for condition, rows in by_condition(frame):
         per_seed, _ = per_seed_mean_over_scenarios(rows, column)
-        groups.append((condition, f"under `{condition}`", per_seed.set_index(["method", "seed"])["value"]))
+        groups.append((condition, f"under {md_code(condition)}", per_seed.set_index(["method", "seed"])["value"]))
     return claim_family(groups)
 
 
@@ -93,16 +94,16 @@ def condition_headline(frame, column: str = "rms_error_nm") -> list[str]:
     scenarios = table.groupby("condition")["scenarios"].first()
     out = []
     for claim in condition_claims(frame, column):
-        out.append(f"Under `{claim.key}`, on the discovery devices, `{claim.first}` has the lowest mean "
+        out.append(f"Under {md_code(claim.key)}, on the discovery devices, {md_code(claim.first)} has the lowest mean "
                    f"`{column}` over the {plural(int(scenarios[claim.key]), 'scenario')} every method "
-                   f"finished, ahead of `{claim.second}` ({claim.means_text()} Nm). {claim.sentence()}")
+                   f"finished, ahead of {md_code(claim.second)} ({claim.means_text()} Nm). {claim.sentence()}")
     leaders = {c: g.dropna(subset=["mean"]).iloc[0]["method"] for c, g in table.groupby("condition", sort=False)
                if g["mean"].notna().any()}
     if len(set(leaders.values())) > 1:
         out.append("Over every device, the lowest mean depends on the condition: " +
-                   ", ".join(f"`{m}` under `{c}`" for c, m in leaders.items()) + ".")
+                   ", ".join(f"{md_code(m)} under {md_code(c)}" for c, m in leaders.items()) + ".")
     elif len(leaders) > 1:
-        out.append(f"Over every device, `{next(iter(leaders.values()))}` has the lowest mean under every "
+        out.append(f"Over every device, {md_code(next(iter(leaders.values())))} has the lowest mean under every "
                    f"condition of this run (whether it leads is said per condition above).")
     return out
 
@@ -112,7 +113,7 @@ def headline_lines(frame, column: str = "rms_error_nm") -> list[str]:
     the claims that are no headline and why; every number from the rows."""
     claims = condition_claims(frame, column)
     made = headlines(claims)
-    out = [f"`{c.first}` leads `{c.second}` under `{c.key}`: lower by a median of {c.discovery.median:.3g} Nm "
+    out = [f"{md_code(c.first)} leads {md_code(c.second)} under {md_code(c.key)}: lower by a median of {c.discovery.median:.3g} Nm "
            f"per device, on {c.discovery.wins}/{c.discovery.n} discovery and {c.replication.wins}/"
            f"{c.replication.n} replication devices." for c in made]
     if not made:
@@ -121,7 +122,7 @@ def headline_lines(frame, column: str = "rms_error_nm") -> list[str]:
                         "discovery devices, the even seeds).")
     others = [c for c in claims if not c.headline]
     if others:
-        out.append("No headline: " + "; ".join(f"`{c.first}` against `{c.second}` under `{c.key}` ({c.status})"
+        out.append("No headline: " + "; ".join(f"{md_code(c.first)} against {md_code(c.second)} under {md_code(c.key)} ({c.status})"
                                               for c in others) + ".")
     return out
 

@@ -27,6 +27,7 @@ say the same things.
 from __future__ import annotations
 
 from rippleb.engine.results import swept_columns
+from rippleb.printable import markdown_code as code
 from rippleb.report.conditions import condition_claims, condition_summary
 from rippleb.report.markdown import markdown, plural
 from rippleb.report.paired import paired_tests
@@ -69,12 +70,12 @@ def holds_blocks(frame, sweeps) -> list[tuple[str, object]]:
             others = [c for c in swept_columns(rows.columns) if c != column]
             for fixed, part in (rows.groupby(others, sort=True) if others else [((), rows)]):
                 fixed = fixed if isinstance(fixed, tuple) else (fixed,)
-                label = "".join(f", `{c}` = {v:g}" for c, v in zip(others, fixed))
+                label = "".join(f", {code(c)} = {v:g}" for c, v in zip(others, fixed))
                 blocks += _one_parameter(name, column, label, part, claims, leaders)
     missed = [c for c in claims if c.key not in covered]
     if missed:
         blocks.append(("p", "No sweep ran the two methods and the condition of: " + "; ".join(
-            f"`{c.first}` against `{c.second}` under `{c.key}`" for c in missed) + "."))
+            f"{code(c.first)} against {code(c.second)} under {code(c.key)}" for c in missed) + "."))
     return blocks
 
 
@@ -83,35 +84,36 @@ def _one_parameter(name, column, label, rows, claims, leaders) -> list[tuple[str
     values = sorted(ok[column].dropna().unique())
     methods = method_order(ok["method"].unique())
     conditions = condition_order(ok["condition"].unique())
-    head = (f"`{column}`{label}: sweep `{name}`, {plural(len(methods), 'method')}, "
+    head = (f"{code(column)}{label}: sweep {code(name)}, {plural(len(methods), 'method')}, "
             f"{plural(ok['scenario'].nunique(), 'scenario')}, {plural(ok['seed'].nunique(), 'device')}")
     blocks = [("h3", head)]
     if len(values) < 2:
-        return blocks + [("p", f"Only one value of `{column}` has ok rows: nothing to compare.")]
+        return blocks + [("p", f"Only one value of {code(column)} has ok rows: nothing to compare.")]
     per_value = {(c, v): _per_device(ok, column, c, v) for c in conditions for v in values}
     table, sentences = [], []
     for claim in claims:
         if claim.key not in conditions or not {claim.first, claim.second} <= set(methods):
             continue
         verdicts = _lead_verdicts(claim, [per_value[(claim.key, v)] for v in values])
-        what = f"`{claim.first}` against `{claim.second}` under `{claim.key}` (in this report: {claim.status})"
+        pair = f"{code(claim.first)} against {code(claim.second)} under {code(claim.key)}"
+        what = f"{pair} (in this report: {claim.status})"
         table.append([what] + [text for _, text in verdicts])
-        sentences.append(_ranges(f"`{claim.first}` against `{claim.second}` under `{claim.key}`", column, values,
+        sentences.append(_ranges(pair, column, values,
                                  [word for word, _ in verdicts]))
     for condition in conditions:
         lowest = [_lowest(per_value[(condition, v)]) for v in values]
         published = leaders.get(condition)
-        what = (f"lowest mean under `{condition}` among the swept methods"
-                + (f" (this report: `{published}`)" if published else ""))
-        table.append([what] + [f"`{m}`" if m else "n/a" for m in lowest])
-        sentences.append(_ranges(f"the lowest mean under `{condition}`", column, values,
-                                 [f"`{m}`" if m else "n/a" for m in lowest]))
+        what = (f"lowest mean under {code(condition)} among the swept methods"
+                + (f" (this report: {code(published)})" if published else ""))
+        table.append([what] + [code(m) if m else "n/a" for m in lowest])
+        sentences.append(_ranges(f"the lowest mean under {code(condition)}", column, values,
+                                 [code(m) if m else "n/a" for m in lowest]))
     blocks += [("table", markdown(table, ["conclusion"] + [f"{v:g}" for v in values])), ("ul", sentences)]
     for condition in conditions:
         ranks = [_ranks(per_value[(condition, v)]) for v in values]
-        rows_ = [[f"`{m}`"] + [str(r.get(m, "n/a")) for r in ranks] for m in methods]
-        blocks += [("h4", f"Each method's rank under `{condition}` among the {len(methods)} swept methods, "
-                          f"by `{column}`{label}"),
+        rows_ = [[code(m)] + [str(r.get(m, "n/a")) for r in ranks] for m in methods]
+        blocks += [("h4", f"Each method's rank under {code(condition)} among the {len(methods)} swept methods, "
+                          f"by {code(column)}{label}"),
                    ("table", markdown(rows_, ["method"] + [f"{v:g}" for v in values]))]
     return blocks
 
@@ -144,9 +146,9 @@ def _lead_verdicts(claim, per_value) -> list[tuple[str, str]]:
         if test.verdict == "unknown":
             out.append(("no paired test", f"fewer than two devices ({test.n})"))
         elif test.verdict == "separated":
-            out.append((f"`{claim.first}` leads", f"`{claim.first}` leads ({numbers})"))
+            out.append((f"{code(claim.first)} leads", f"{code(claim.first)} leads ({numbers})"))
         elif test.p < 0.05:     # separated the other way
-            out.append((f"`{claim.second}` leads", f"`{claim.second}` leads ({numbers})"))
+            out.append((f"{code(claim.second)} leads", f"{code(claim.second)} leads ({numbers})"))
         else:
             out.append(("not separated", f"not separated ({numbers})"))
     return out
@@ -162,15 +164,15 @@ def _ranges(what: str, column: str, values, words) -> str:
     parts = []
     for a, b in runs:
         if len(runs) == 1:
-            where = f"at every value of `{column}` swept ({values[0]:g} to {values[-1]:g})"
+            where = f"at every value of {code(column)} swept ({values[0]:g} to {values[-1]:g})"
         elif a == b:
-            where = f"at `{column}` = {values[a]:g}"
+            where = f"at {code(column)} = {values[a]:g}"
         elif a == 0:
-            where = f"for `{column}` <= {values[b]:g}"
+            where = f"for {code(column)} <= {values[b]:g}"
         elif b == len(values) - 1:
-            where = f"for `{column}` >= {values[a]:g}"
+            where = f"for {code(column)} >= {values[a]:g}"
         else:
-            where = f"for `{column}` from {values[a]:g} to {values[b]:g}"
+            where = f"for {code(column)} from {values[a]:g} to {values[b]:g}"
         parts.append(f"{words[a]} {where}")
     return f"{what}: " + "; ".join(parts) + "."
 

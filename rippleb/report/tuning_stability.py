@@ -22,12 +22,10 @@ Examples
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 import numpy as np
 
 from rippleb.errors import InputError
+from rippleb.printable import markdown_code as code
 from rippleb.report.markdown import markdown
 from rippleb.tuning import EVERY_DEVICE, RULE_ID, adopted
 
@@ -36,13 +34,37 @@ RULES = (RULE_ID, EVERY_DEVICE)
 
 
 def read(path) -> dict:
-    """A tuning record written by ``rippleb tune --out``; one line naming the file otherwise."""
+    """A tuning record written by ``rippleb tune --out``, read within the cap of a run's files
+    (:mod:`rippleb.reading`); one line naming the file otherwise (missing, too large, not
+    JSON, or without the fields the table reads: the seeds, and per method its points'
+    params and scores)."""
+    from rippleb.reading import RUN_FILE_BYTES, parse_json, read_text
+
     try:
-        record = json.loads(Path(path).read_text())
-        record["methods"], record["protocol"]["seeds"]  # noqa: B018 - the fields the table reads
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise InputError(f"{path}: not a tuning record written by 'rippleb tune --out' ({exc})") from None
+        record = parse_json(read_text(path, RUN_FILE_BYTES, "tuning record"), path)
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such tuning record") from None
+    if not _is_record(record):
+        raise InputError(f"{path}: not a tuning record written by 'rippleb tune --out' (it needs protocol.seeds "
+                         f"and, per method, points with params and scores)")
     return record
+
+
+def _is_record(record) -> bool:
+    """Whether ``record`` has the fields :func:`stability_rows` reads, of the types it reads."""
+    def number(v):
+        return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+    def point(p):
+        return (isinstance(p, dict) and isinstance(p.get("params"), dict) and isinstance(p.get("scores"), list)
+                and all(number(v) for v in [*p["params"].values(), *p["scores"]]))
+
+    protocol = record.get("protocol") if isinstance(record, dict) else None
+    seeds = protocol.get("seeds") if isinstance(protocol, dict) else None
+    methods = record.get("methods") if isinstance(record, dict) else None
+    return (isinstance(seeds, list) and all(isinstance(s, int) for s in seeds) and isinstance(methods, dict)
+            and all(isinstance(e, dict) and isinstance(e.get("points"), list) and e["points"]
+                    and all(point(p) for p in e["points"]) for e in methods.values()))
 
 
 def stability_rows(a: dict, b: dict, rule: str = RULE_ID) -> list[dict]:
@@ -77,7 +99,7 @@ def stability_rows(a: dict, b: dict, rule: str = RULE_ID) -> list[dict]:
 def _point(params: list[dict], index: int) -> str:
     if not params[index]:
         return "nothing to tune"
-    values = ", ".join(f"`{k}` = {v:g}" for k, v in params[index].items())
+    values = ", ".join(f"{code(k)} = {v:g}" for k, v in params[index].items())
     return f"default ({values})" if index == 0 else values
 
 
@@ -99,7 +121,7 @@ def stability_markdown(a: dict, b: dict) -> str:
     for r in rows[RULE_ID]:
         ia, ib = r["adopted"]
         old = former[r["method"]]
-        table.append([f"`{r['method']}`", _point(r["params"], ia), _point(r["params"], ib),
+        table.append([code(r["method"]), _point(r["params"], ia), _point(r["params"], ib),
                       "yes" if r["same"] else "no", f"{r['cost'][0]:+.3f}", f"{r['cost'][1]:+.3f}",
                       f"{'replaced' if old['adopted'][0] else 'kept'} / {'replaced' if old['adopted'][1] else 'kept'}"
                       + ("" if old["same"] else " (differ)")])
@@ -115,6 +137,6 @@ def stability_markdown(a: dict, b: dict) -> str:
         text = f"By {words}, {same} of {len(tuned[rule])} methods with something to tune adopt the same point on both sets"
         if worst is not None and max(worst["cost"]) > 0:
             text += (f"; tuning on the other set costs at most {max(worst['cost']):.3f} Nm of calibration score "
-                     f"(`{worst['method']}`)")
+                     f"({code(worst['method'])})")
         sentences.append(text + ".")
     return markdown(table, heads) + "\n\n" + "\n".join(f"- {s}" for s in sentences)

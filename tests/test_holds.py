@@ -85,6 +85,28 @@ def test_the_page_and_the_readme_say_the_same_things():
                 assert _md(text) in page
 
 
+def test_hostile_names_render_as_themselves():
+    """Method labels, the condition and the sweep's path are anyone's text (a plugin's name,
+    a results file, a directory; a swept column is one of rippleb's parameters): the section
+    renders none of it as markup, on GitHub (cmark-gfm, raw HTML let through) and on the
+    HTML page."""
+    from test_report_escaping import HOSTILE, Page, render
+
+    names = {"a": HOSTILE[0], "b": HOSTILE[4], "c": HOSTILE[2]}
+    report, sweep = REPORT.replace({"method": names}), _sweep().replace({"method": names})
+    report, sweep = (f.assign(condition=HOSTILE[7]) for f in (report, sweep))
+    blocks = holds_blocks(report, [(HOSTILE[3], sweep)])
+    page = Page(render(blocks_markdown(blocks)))
+    assert set(page.tags()) <= {"h2", "h3", "h4", "p", "ul", "li", "table", "thead", "tbody", "tr", "th", "td",
+                                "code"}, page.elements
+    for text in (HOSTILE[0], HOSTILE[2], HOSTILE[3], HOSTILE[4], HOSTILE[7]):
+        assert text in page.text, text
+    html = Page("".join(_block(kind, content) for kind, content in blocks))
+    assert set(html.tags()) <= {"h2", "h3", "h4", "p", "ul", "li", "table", "thead", "tbody", "tr", "th", "td",
+                                "code"}, html.elements
+    assert HOSTILE[0] in html.text
+
+
 def test_a_directory_without_swept_values_is_one_line(tmp_path):
     from rippleb.engine.results import COLUMNS
 

@@ -216,8 +216,10 @@ def test_the_stability_table_in_the_docs_is_generated_from_its_records():
 
     here = Path(__file__).resolve().parent.parent / "docs"
     records = sorted((here / "tuning-stability").glob("*.json"))
-    assert len(records) == 2, records
-    assert stability_markdown(*(read(p) for p in records)) in (here / "tuning.md").read_text()
+    assert len(records) == 2, (f"docs/tuning-stability/ holds {len(records)} records, not 2: make them with the "
+                               f"commands of docs/tuning.md, 'Re-tuning after a change of the physics'")
+    assert stability_markdown(*(read(p) for p in records)) in (here / "tuning.md").read_text(), \
+        "docs/tuning.md's stability table is not what 'rippleb tune --compare' prints for docs/tuning-stability/"
 
 
 @pytest.mark.parametrize("args, message", [

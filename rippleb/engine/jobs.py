@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rippleb.engine.cache import Artefact, load_log, log_bytes, pack, store
+from rippleb.engine.cache import Artefact, load_log, log_bytes, pack, pack_raw, store
 from rippleb.data import SensorLog
 from rippleb.scoring import metrics
 from rippleb.scoring.metrics import Truth
@@ -153,6 +153,6 @@ def run_row(method: str, params: dict | None, calibration, evaluation, registry,
 
 
 def row_message(result: dict) -> bytes:
-    """:func:`run_row`'s result as message bytes."""
-    return pack({k: result[k] for k in ("estimate", "ticks") if k in result}, result["info"])
+    """:func:`run_row`'s result as message bytes: the estimate's float64 as they are (:func:`pack_raw`)."""
+    return pack_raw({k: result[k] for k in ("estimate", "ticks") if k in result}, result["info"])
 

@@ -32,9 +32,10 @@ def prepare_blocks(log: SensorLog, size: int | None = None) -> list:
 def stream(step, blocks: list, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
     """Feed ``blocks`` to ``step`` in order; return the estimate and each call's time [ns].
 
-    Per tick the harness checks only shape and dtype (a cheap attribute test); the
-    finiteness of the whole estimate is checked once at the end, which keeps the harness
-    overhead per tick near one microsecond.
+    Per tick the harness checks only shape and dtype (a cheap attribute test: ``float64``,
+    so that no integer, however large, passes as a torque); the finiteness of the whole
+    estimate is checked once at the end, which keeps the harness overhead per tick near one
+    microsecond.
 
     Raises
     ------
@@ -45,6 +46,7 @@ def stream(step, blocks: list, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
     ticks = np.empty(len(blocks), dtype=np.int64)
     clock = time.perf_counter_ns
     asarray = np.asarray
+    float64 = np.dtype(np.float64)
     pos = 0
     for k, block in enumerate(blocks):
         t0 = clock()
@@ -53,9 +55,9 @@ def stream(step, blocks: list, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
         ticks[k] = t1 - t0
         m = len(block.t)
         y = asarray(y)
-        if y.shape != (m,) or y.dtype.kind not in "fiu":
+        if y.shape != (m,) or y.dtype != float64:
             raise InvalidOutput(f"step returned {_describe(y)} for a block of {m} samples "
-                                f"(tick {k}); expected {m} floats")
+                                f"(tick {k}); expected {m} float64 values")
         out[pos:pos + m] = y
         pos += m
     bad = ~np.isfinite(out)

@@ -64,7 +64,8 @@ def test_page_shows_the_tuning_the_run_recorded(tmp_path):
     page = html_report.write_html(conditions_frame(), prov, tmp_path / "index.html").read_text()
     adopted = read_record()["methods"]["order-tracking"]["adopted"]
     assert page.count('class="sortable"') == 5  # and the tuning table
-    assert f"`q` = {adopted['q']:g}" in page   # table cells are plain text
+    # a table cell's Markdown is rendered as the README renders it: its code spans as <code>
+    assert f"<code>q</code> = {adopted['q']:g}" in page
 
 
 def test_hover_of_every_row_names_method_scenario_condition_and_seed(tmp_path):

@@ -123,6 +123,8 @@ def check_causality(s: Subject) -> None:
     columns = {n: np.array(v) for n, v in log.columns().items()}
     tail = len(log) - k
     columns["strain"][k:] += rng.normal(0, np.std(log.strain) + 1e-3, tail)
+    if "channels" in columns:   # a gauge layout's channels change with the strain
+        columns["channels"][k:] += rng.normal(0, np.std(log.strain) + 1e-3, columns["channels"][k:].shape)
     columns["current"][k:] += rng.normal(0, np.std(log.current) + 1e-3, tail)
     columns["encoder"][k:] += np.cumsum(rng.integers(-3, 4, tail))
     changed = dataclasses.replace(log, **columns)

@@ -18,13 +18,12 @@ passes one.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import pickle
 import traceback
 from dataclasses import dataclass
 
-import numpy as np
-
-from rippleb.engine.cache import Artefact, load_log, log_bytes, pack, pack_raw, store
+from rippleb.engine.cache import Artefact, load_log, log_bytes, pack, pack_raw, store, unpack
 from rippleb.data import SensorLog
 from rippleb.scoring import metrics
 from rippleb.scoring.metrics import Truth
@@ -46,19 +45,31 @@ class Job:
     ``kind`` is ``simulate`` (``args`` of :func:`simulate_case`), ``fit`` (of
     :func:`fit_method` without the registry) or ``row`` (of :func:`run_row` without the
     registry: method, params, calibration, evaluation, fitted, fit_info).
+
+    A method's worker runs it in two parts (:meth:`prepare`), so that its inputs are read
+    before the walls close every file but the method's own package and the libraries.
     """
 
     kind: str
     args: tuple
 
     def __call__(self, registry) -> bytes:
+        return self.prepare(registry)()
+
+    def prepare(self, registry):
+        """rippleb's part, run before the walls: read and verify the job's inputs (the cache
+        is unreadable behind them); returns the part that runs the method's code."""
         if self.kind == "simulate":
-            return simulate_case(*self.args)
+            return functools.partial(simulate_case, *self.args)
         if self.kind == "fit":
-            return fit_method(*self.args, registry)
+            method, params, calibration = self.args
+            return functools.partial(fit_method, method, params, load_log(calibration), registry)
         method, params, calibration, evaluation, fitted, fit_info = self.args
-        return row_message(run_row(method, params, calibration, evaluation, registry,
-                                   fitted=fitted, fit_info=fit_info))
+        evaluation = visible_log(load_log(evaluation), SCORED)
+        blob = fitted.read() if isinstance(fitted, Artefact) else fitted
+        calibration = load_log(calibration) if blob is None else None
+        return lambda: row_message(run_row(method, params, calibration, evaluation, registry,
+                                           fitted=blob, fit_info=fit_info))
 
 
 def visible_log(log: SensorLog, role: str) -> SensorLog:
@@ -103,13 +114,15 @@ def truth_from_message(arrays: dict, info: dict) -> Truth:
     return Truth(fs=float(info["fs"]), **{name: arrays.get(name) for name in TRUTH_ARRAYS})
 
 
-def fit_method(method: str, params: dict | None, calibration, registry) -> bytes:
+def fit_method(method: str, params: dict | None, calibration, registry) -> tuple[bytes, bytes, bytes]:
     """Fit ``method`` on ``calibration`` and pickle it.
 
-    Returns message bytes whose info holds ``status``, ``message``, ``params`` and
-    ``fit_s`` and, if the fitted method could be pickled, whose array ``fitted`` holds the
-    pickle. The runner stores it (:func:`rippleb.engine.cache.store`): a method's worker sees the
-    cache read-only (:func:`rippleb.engine.process.isolation.confine_files`).
+    Returns the message as three pieces (:func:`fit_message`): the pickle (empty if the
+    fit failed, or if the fitted method cannot be pickled: its rows then fit it
+    themselves), the info (``status``, ``message``, ``params``, and the in-process
+    ``fit_s`` the runner replaces with the time measured outside), and the info's length.
+    The runner receives it into a file of the cache (:func:`read_fit`): a method's worker
+    cannot write there (:func:`rippleb.engine.process.isolation.confine_files`).
     """
     calibration = load_log(calibration)  # verified before any method code runs
     info = {"status": "ok", "message": "", "params": ""}
@@ -118,24 +131,51 @@ def fit_method(method: str, params: dict | None, calibration, registry) -> bytes
         fitted, info["params"], info["fit_s"] = harness.fitted(cls, params, calibration)
     except Exception as exc:  # the fit's failure becomes the status of each of its rows
         traceback.print_exc()
-        return pack({}, {**info, "status": "error", "message": one_line(exc)})
+        return fit_message(b"", {**info, "status": "error", "message": one_line(exc)})
     try:
         blob = pickle.dumps(fitted, protocol=pickle.HIGHEST_PROTOCOL)
     except Exception:  # not picklable (a lambda, a handle): its rows fit it themselves
-        return pack({}, info)
-    return pack({"fitted": np.frombuffer(blob, dtype=np.uint8)}, info)
+        blob = b""
+    return fit_message(blob, info)
+
+
+def fit_message(blob: bytes, info: dict) -> tuple[bytes, bytes, bytes]:
+    """A fit's result: the pickle first, then its info (:func:`rippleb.engine.cache.pack`
+    bytes), then their length in 8 bytes, so the info is read from the end of the file the
+    pickle stays in."""
+    meta = pack({}, info)
+    return blob, meta, len(meta).to_bytes(8, "little")
+
+
+def read_fit(path) -> tuple[dict, int]:
+    """The info of the fit result in the file ``path`` and the length of its pickle; the
+    file is cut to the pickle. Raises ``ValueError`` when it is not what :func:`fit_message`
+    makes (the bytes of a method's process are untrusted)."""
+    with open(path, "r+b") as fh:
+        size = fh.seek(0, 2)
+        if size < 8:
+            raise ValueError("a fit result shorter than its trailer")
+        fh.seek(size - 8)
+        length = int.from_bytes(fh.read(8), "little")
+        if length > min(size - 8, 2**20):
+            raise ValueError("a fit result whose info does not fit it")
+        fh.seek(size - 8 - length)
+        _, info = unpack(fh.read(length))
+        fh.truncate(size - 8 - length)
+    return info, size - 8 - length
 
 
 def run_row(method: str, params: dict | None, calibration, evaluation, registry,
-            fitted: Artefact | None = None, fit_info: dict | None = None) -> dict:
-    """The row job: fit (or load the fitted method), ``reset``, stream ``evaluation``.
+            fitted: Artefact | bytes | None = None, fit_info: dict | None = None) -> dict:
+    """The row job: fit (or load the fitted method: its pickle, or the artefact holding it),
+    ``reset``, stream ``evaluation``.
 
     Returns a dict with ``info`` (status, message, params, fit_s, n_samples), and for an
     ``ok`` row the ``estimate`` [Nm] and ``ticks`` (ns per ``step`` call).
     """
     evaluation = visible_log(load_log(evaluation), SCORED)
-    blob = fitted.read() if fitted is not None else None
-    calibration = load_log(calibration) if fitted is None else None
+    blob = fitted.read() if isinstance(fitted, Artefact) else fitted
+    calibration = load_log(calibration) if blob is None else None
     info = {"status": "ok", "message": "", "params": "", "n_samples": len(evaluation), **(fit_info or {})}
     try:
         cls = registry.get(method).load()

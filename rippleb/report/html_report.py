@@ -26,7 +26,7 @@ COLORS = {"raw": "#1f77b4", "lowpass": "#17becf", "current-based": "#bf00bf", "o
           "order-tracking-no-deadzone": "#ff7f0e", "order-tracking-no-backprop": "#8c564b",
           "switched-notch": "#2ca02c", "kalman-ripple": "#9467bd", "angle-adaptive": "#bcbd22",
           "angle-adaptive-frozen": "#7f7f7f", "spatial-filter": "#aec7e8", "fourier-lms": "#e377c2",
-          "periodic-dob": "#393b79", "gear-aware": "#525252"}
+          "periodic-dob": "#393b79", "gear-aware": "#525252", "gear-keeping": "#98df8a"}
 
 STYLE = """body{font-family:system-ui,sans-serif;margin:1.5em auto;max-width:1200px;color:#222}
 table{border-collapse:collapse;margin:.5em 0 1.5em;font-size:13px}
@@ -177,13 +177,10 @@ def _metrics_table(rows) -> str:
 
 def _markdown_table(text: str) -> str:
     """A GitHub Markdown table (as :mod:`rippleb.report.tables` writes) as a sortable HTML table."""
-    # split on the bars that are not escaped: rippleb.report.tables.markdown writes a bar in a cell
-    # as a backslash and a bar
-    lines = [[c.replace("\\|", "|") for c in re.split(r"(?<!\\)\|", line.strip()[1:-1])]
-             for line in text.splitlines() if line.startswith("|")]
+    lines = [_cells(line.strip()) for line in text.splitlines() if line.startswith("|")]
     if len(lines) < 2:
-        return f"<p>{html.escape(text)}</p>"
-    head = "".join(f"<th>{html.escape(c.strip())}</th>" for c in lines[0])
+        return f"<p>{_md(text)}</p>"
+    head = "".join(f"<th>{_md(c.strip())}</th>" for c in lines[0])
     rows = []
     for cells in lines[2:]:
         tds = []
@@ -194,7 +191,7 @@ def _markdown_table(text: str) -> str:
             except ValueError:
                 v = ""
             text = i == 0 or v == ""  # names and words left-aligned, numbers right
-            tds.append(f'<td class="{"text" if text else ""}" data-v="{v}">{html.escape(c)}</td>')
+            tds.append(f'<td class="{"text" if text else ""}" data-v="{v}">{_md(c)}</td>')
         rows.append("<tr>" + "".join(tds) + "</tr>")
     return f'<table class="sortable"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
 
@@ -205,13 +202,78 @@ def _provenance_table(prov: dict) -> str:
     return _markdown_table(provenance_markdown(prov))
 
 
+def _cells(line: str) -> list[str]:
+    """The cells of one table line ``| a | b |``, as GitHub reads them: split at the bars
+    without a backslash before them (:func:`rippleb.report.markdown.markdown` writes a bar in
+    a cell as ``\\|``), each ``\\|`` made a bar again before the cell is read as Markdown."""
+    cells, current, i = [], [], 1 if line.startswith("|") else 0
+    end = len(line) - 1 if line.endswith("|") and not line.endswith("\\|") else len(line)
+    while i < end:
+        char = line[i]
+        if char == "\\" and line[i + 1:i + 2] == "|":
+            current.append("|")
+            i += 2
+            continue
+        if char == "|":
+            cells.append("".join(current))
+            current = []
+        else:
+            current.append(char)
+        i += 1
+    return cells + ["".join(current)]
+
+
+#: A backslash escape: a backslash and the ASCII punctuation mark it makes literal.
+_ESCAPE = re.compile(r"\\([!-/:-@\[-`{-~])")
+
+
 def _md(text: str) -> str:
-    """Escape ``text`` and turn Markdown back-ticks into <code>."""
-    parts = html.escape(text).split("`")
-    return "".join(f"<code>{p}</code>" if i % 2 else p for i, p in enumerate(parts))
+    """The Markdown of a sentence or a table cell as the report writes it, as HTML: its code
+    spans (fenced by runs of backticks) as <code>, its backslash escapes resolved, and every
+    character escaped for HTML (:func:`html.escape`). The same strings as the README, so
+    both pages say the same; :func:`rippleb.printable.markdown_text` and ``markdown_code``
+    wrote whatever they hold that rippleb did not choose."""
+    out, i, plain = [], 0, []
+    while i < len(text):
+        if text[i] == "\\" and i + 1 < len(text) and _ESCAPE.match(text, i):
+            plain.append(text[i + 1])
+            i += 2
+            continue
+        if text[i] == "`":
+            run = len(text[i:]) - len(text[i:].lstrip("`"))
+            fence = text[i:i + run]
+            close = re.compile(f"(?<!`){fence}(?!`)").search(text, i + run)
+            if close is not None:
+                out.append(html.escape("".join(plain)))
+                plain = []
+                body = text[i + run:close.start()]
+                if len(body) > 1 and body[0] == body[-1] == " " and body.strip():
+                    body = body[1:-1]
+                out.append(f"<code>{html.escape(body)}</code>")
+                i = close.end()
+                continue
+            plain.append(fence)
+            i += run
+            continue
+        plain.append(text[i])
+        i += 1
+    out.append(html.escape("".join(plain)))
+    return "".join(out)
 
 
 # --------------------------------------------------------------------------- figures
+
+def _text(value) -> str:
+    """A name as plotly's text: plotly reads tags and entities in legends, titles and hover
+    labels (its own subset of HTML, links included), so a name is escaped for HTML."""
+    return html.escape(str(value))
+
+
+def _hover(rows):
+    """The hover fields of each row: method, scenario, condition (escaped) and seed."""
+    return np.column_stack([[_text(v) for v in rows[c]] for c in ("method", "scenario", "condition")]
+                           + [rows["seed"]])
+
 
 def _color(method: str, index: int) -> str:
     fallback = ("#9edae5", "#c49c94", "#f7b6d2", "#000000")
@@ -233,7 +295,7 @@ def _rows_figure(frame, column: str = "rms_error_nm"):
     ok = frame[frame["status"] == "ok"]
     conditions = condition_order(ok["condition"].unique()) or ["same-session"]
     fig = make_subplots(rows=len(conditions), cols=1, shared_xaxes=True,
-                        subplot_titles=[f"condition {c}" for c in conditions], vertical_spacing=0.08)
+                        subplot_titles=[f"condition {_text(c)}" for c in conditions], vertical_spacing=0.08)
     methods = method_order(ok["method"].unique())
     scenarios = scenario_order(ok["scenario"].unique())
     for k, condition in enumerate(conditions, start=1):
@@ -242,14 +304,14 @@ def _rows_figure(frame, column: str = "rms_error_nm"):
             mine = rows[rows["method"] == m]
             fig.add_trace(go.Scatter(
                 x=[scenarios.index(s) + (i - len(methods) / 2) * 0.08 for s in mine["scenario"]],
-                y=mine[column], mode="markers", name=m, legendgroup=m, showlegend=(k == 1),
+                y=mine[column], mode="markers", name=_text(m), legendgroup=m, showlegend=(k == 1),
                 marker={"color": _color(m, i), "size": 6, "opacity": 0.75},
-                customdata=np.column_stack([mine["method"], mine["scenario"], mine["condition"], mine["seed"]]),
+                customdata=_hover(mine),
                 hovertemplate="method %{customdata[0]}<br>scenario %{customdata[1]}<br>condition "
                               "%{customdata[2]}<br>seed %{customdata[3]}<br>" + column + " %{y:.4g}<extra></extra>"),
                 row=k, col=1)
         fig.update_yaxes(type="log", title_text=AXIS_TITLES.get(column, column), row=k, col=1)
-    fig.update_xaxes(tickvals=list(range(len(scenarios))), ticktext=scenarios)
+    fig.update_xaxes(tickvals=list(range(len(scenarios))), ticktext=[_text(s) for s in scenarios])
     fig.update_layout(height=320 * len(conditions) + 80, margin={"t": 40, "b": 40}, legend={"orientation": "h"})
     return fig
 
@@ -264,8 +326,8 @@ def _cost_figure(frame, column: str = "rms_error_nm"):
     for i, m in enumerate(method_order(ok["method"].unique())):
         mine = ok[ok["method"] == m]
         fig.add_trace(go.Scatter(
-            x=mine[cost], y=mine[column], mode="markers", name=m, marker={"color": _color(m, i), "size": 6},
-            customdata=np.column_stack([mine["method"], mine["scenario"], mine["condition"], mine["seed"]]),
+            x=mine[cost], y=mine[column], mode="markers", name=_text(m), marker={"color": _color(m, i), "size": 6},
+            customdata=_hover(mine),
             hovertemplate="method %{customdata[0]}<br>scenario %{customdata[1]}<br>condition %{customdata[2]}"
                           "<br>seed %{customdata[3]}<br>" + cost + " %{x:.3g} us<br>" + column
                           + " %{y:.4g}<extra></extra>"))
@@ -287,11 +349,10 @@ def _restart_figure(frame, seed, signals):
     if seed is None or "stop-restart" not in set(ok["scenario"]):
         return None
     sig = (signals or {}).get("stop-restart")
-    if sig is None:
-        from rippleb.report.figures import fit_methods, stream_methods
+    if sig is None:   # re-streamed in the methods' sandboxed workers, as the figures are
+        from rippleb.report.plotting import restream
 
-        fitted, _ = fit_methods(method_order(ok["method"].unique()), seed)
-        sig = stream_methods(fitted, "stop-restart", seed)
+        sig = restream(method_order(ok["method"].unique()), ["stop-restart"], seed)[0]["stop-restart"]
     log = sig.sim.log
     every = max(1, int(round(log.spec.fs / log.spec.control_rate)))
     pick = slice(every - 1, None, every)
@@ -299,7 +360,7 @@ def _restart_figure(frame, seed, signals):
     fig.add_trace(go.Scatter(x=log.t[pick], y=log.torque_true[pick], name="torque_true",
                              line={"color": "black", "width": 2}))
     for i, m in enumerate(method_order(sig.estimates)):
-        fig.add_trace(go.Scatter(x=log.t[pick], y=sig.estimates[m][pick], name=m,
+        fig.add_trace(go.Scatter(x=log.t[pick], y=sig.estimates[m][pick], name=_text(m),
                                  line={"color": _color(m, i), "width": 1}))
     fig.update_layout(xaxis={"title": "time [s]", "rangeslider": {"visible": True}},
                       yaxis={"title": "torque [Nm]"}, height=520, margin={"t": 30})

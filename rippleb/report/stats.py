@@ -18,7 +18,8 @@ PAPER_SCENARIO = "paper-quintic"
 #: The order methods appear in (baselines, the paper's comparison, then the alternatives).
 METHOD_ORDER = ("raw", "lowpass", "current-based", "order-tracking", "order-tracking-no-deadzone",
                 "order-tracking-no-backprop", "switched-notch", "kalman-ripple", "angle-adaptive",
-                "angle-adaptive-frozen", "gear-aware", "spatial-filter", "fourier-lms", "periodic-dob")
+                "angle-adaptive-frozen", "gear-aware", "gear-keeping", "spatial-filter", "fourier-lms",
+                "periodic-dob", "gain-tuned")
 
 
 def t_interval(values, confidence: float = CONFIDENCE) -> tuple[float, float, int]:

@@ -15,14 +15,24 @@ from rippleb.scoring.metrics import Truth, tick_stats
 from rippleb.scoring.scorable import MEASURED, NO_REFERENCE, NO_REFERENCE_MESSAGE, implausible
 
 
-def score_row(arrays: dict, truth: Truth, n_samples: int, n_ticks: int) -> dict:
+#: The least time one ``step`` can take by the harness's clock [ns]: a call of a Python method
+#: and two readings of the clock take more (a step that returns at once: 100 ns at least,
+#: 191 ns median over 20 000 ticks, on the 2-core machine of docs/robustness.md section 11).
+#: A method that stops its clock or rewrites its tick times claims less (issue 41: 0 us
+#: against 502 us honestly timed).
+MIN_TICK_NS = 20
+
+
+def score_row(arrays: dict, truth: Truth, n_samples: int, n_ticks: int, method_s: float | None = None) -> dict:
     """The columns of a row whose method ran to the end: ``status`` (``ok``,
     :data:`~rippleb.scoring.scorable.NO_REFERENCE` or ``invalid``), ``message`` where it is
     not ``ok``, ``n_samples``, the scores (:func:`score_or_invalid`) and, for a measured row,
     the timing columns (:func:`~rippleb.scoring.metrics.tick_stats`).
 
     ``arrays`` holds what the row sent: ``estimate`` and ``ticks`` (checked here by
-    :func:`check_estimate`, whatever the row claimed).
+    :func:`check_estimate`, whatever the row claimed); ``method_s`` the seconds its
+    method's part took, measured outside its process (None in a process of one's own), which
+    the tick times must agree with (:func:`check_ticks`).
     """
     checked = check_estimate(arrays, n_samples, n_ticks)
     if isinstance(checked, str):
@@ -30,8 +40,34 @@ def score_row(arrays: dict, truth: Truth, n_samples: int, n_ticks: int) -> dict:
     estimate, ticks = checked
     fields = {"status": "ok", "n_samples": n_samples, **score_or_invalid(estimate, truth)}
     if fields["status"] in MEASURED:
-        fields.update(tick_stats(ticks, n_samples))
+        why = check_ticks(ticks, method_s)
+        if why:
+            return {"status": "invalid", "message": why}
+        fields.update(tick_stats(ticks, n_samples, method_s))
     return fields
+
+
+def check_ticks(ticks: np.ndarray, method_s: float | None) -> str:
+    """Why the tick times a row sent cannot be its steps' times, or ''.
+
+    They come from the harness's clock inside the method's process, which the method can
+    stop or rewrite; they must each be a time a step can take (:data:`MIN_TICK_NS`), and
+    all together no more than ``method_s``, its part of the row as measured outside its
+    process (None: measured in a process of one's own, nothing to compare with).
+    """
+    if not len(ticks):
+        return ""
+    shortest = int(np.min(ticks))
+    if shortest <= 0:
+        return "its tick times are not times: a step took no time by the clock in its process"
+    if shortest < MIN_TICK_NS:
+        return (f"a step took {shortest} ns by the clock in its process, less than any call of a Python method "
+                f"takes ({MIN_TICK_NS} ns): its clock does not measure its work")
+    total_s = float(np.sum(ticks, dtype=np.float64)) / 1e9
+    if method_s is not None and total_s > method_s:
+        return (f"its steps took {total_s:.4g} s by the clock in its process, more than the {method_s:.4g} s "
+                f"its whole part of the row took, measured outside it")
+    return ""
 
 
 def check_estimate(arrays: dict, n_samples: int, n_ticks: int) -> tuple[np.ndarray, np.ndarray] | str:
@@ -44,8 +80,8 @@ def check_estimate(arrays: dict, n_samples: int, n_ticks: int) -> tuple[np.ndarr
     estimate, ticks = arrays.get("estimate"), arrays.get("ticks")
     if estimate is None or ticks is None:
         return "the row sent no estimate"
-    if estimate.dtype.kind != "f" or estimate.shape != (n_samples,):
-        return f"estimate of shape {estimate.shape} dtype {estimate.dtype}, expected {n_samples} floats"
+    if estimate.dtype != np.float64 or estimate.shape != (n_samples,):
+        return f"estimate of shape {estimate.shape} dtype {estimate.dtype}, expected {n_samples} float64 values"
     if not np.isfinite(estimate).all():
         return "estimate holds NaN/inf values"
     if ticks.dtype.kind not in "iu" or ticks.shape != (n_ticks,):

@@ -128,9 +128,8 @@ class GearKeeping(AngleAdaptive):
     description = ("angle-adaptive whose map is learned beside an encoder model of the gear's dynamic torque "
                    "(gear_model=dynamic, orders 1 and 2; the estimate keeps it), and only up to the "
                    "calibration's top speed (speed_cover=1.0); held above it (memory_revs=139.0)")
-    #: the online law's ranges, as angle-adaptive's (rippleb/tuning.py)
-    tunable = {"memory_revs": (3.0, 300.0, "log"), "prior_sd_nm": (0.03, 3.0, "log"),
-               "min_counts": (1, 5, "int")}
+    #: the online law's ranges: angle-adaptive's own (rippleb/tuning.py)
+    tunable = AngleAdaptive.tunable
 
     def __init__(self, orders: tuple = (1, 2, 4, 6, 8), memory_revs: float = 139.0,
                  prior_sd_nm: float = 0.0446, floor_sd_nm: float = 1.0, min_counts: int = 2,

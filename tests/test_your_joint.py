@@ -42,7 +42,7 @@ def test_a_run_says_what_it_assumed_before_it_starts(tmp_path, monkeypatch, caps
     _frame().to_csv(tmp_path / "rec.csv", index=False)
     code, err, rows = _run(tmp_path, monkeypatch, capsys, "--log", "rec.csv")
     assert code == 0, err
-    assert "counts_per_rev = 2500 (ASSUMED (rippleb's default))" in err
+    assert "counts_per_rev = 2500 (ASSUMED (rippleb's default);" in err
     assert "column strain = 'strain' in V (ASSUMED" in err
     assert err.index("counts_per_rev") < err.index("no --calibration")   # before the run, not after
 
@@ -154,7 +154,7 @@ def test_the_worked_example_of_docs_your_joint(tmp_path):
     done = _cli("run", "--log", "rec.csv", "--calibration", "cal.csv", "--joint", "joint.toml",
                 "--methods", "raw,order-tracking", "--jobs", "1", "--no-progress", "--out", "ranked", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
-    assert "(ASSUMED" not in done.stderr and "counts_per_rev = 16384 (given in joint.toml)" in done.stderr
+    assert "(ASSUMED" not in done.stderr and "counts_per_rev = 16384 (given in joint.toml; agrees with the index pulses" in done.stderr
     rows = pd.read_csv(tmp_path / "ranked" / "results.csv").set_index("method")
     assert (rows.status == "ok").all()
     assert rows.rms_error_ref_nm["order-tracking"] < rows.rms_error_ref_nm["raw"]

@@ -312,7 +312,8 @@ def read_log(path: str | Path, spec: JointSpec | None = None, *, joint=None,
     if spec is not None:
         joint_file.check_agrees(spec, description, str(path))
     log = make_log(spec or _spec_from(description, columns, str(path)), columns, source=str(path),
-                   meta={"source": str(path), "reference_kind": description.reference_kind})
+                   meta={"source": str(path), "reference_kind": description.reference_kind,
+                         "columns": {k: f"{v['column']!r} in {v['unit']}" for k, v in units.items()}})
     notes = joint_checks.notes(log, description, str(path), spec_given=spec is not None)
     log.meta["joint"] = joint_file.describe(log.spec, description, units, log.index is not None,
                                             spec_given=spec is not None, notes=notes)

@@ -31,15 +31,15 @@ LAB_COLUMNS = {
 REFERENCE_COLUMNS = {"transducer": "torque_sensor_Nm", "model": "model_torque_Nm"}
 
 
-def lab_columns(log, reference, kind: str) -> dict:
-    """The columns of ``log`` under the DAQ's names and in its units, ``reference`` [Nm] (of
-    ``kind``) as the reference, and no ``torque_true``."""
+def lab_columns(log, kind: str) -> dict:
+    """The columns of ``log`` under the DAQ's names and in its units, its ``torque_ref`` (of
+    ``kind``) under the name of that kind, and no ``torque_true``."""
     out = {}
     for name, (column, _unit, factor) in LAB_COLUMNS.items():
         values = getattr(log, name)
         if values is not None:
             out[column] = values * factor if factor != 1 else values
-    out[REFERENCE_COLUMNS[kind]] = reference
+    out[REFERENCE_COLUMNS[kind]] = log.torque_ref
     return out
 
 

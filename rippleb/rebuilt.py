@@ -39,16 +39,18 @@ ORDERS = tuple(range(1, 9))
 #: error's twice and once per turn, docs/physics.md; order 4 too, where a drive's error
 #: has a component).
 GEAR_ORDERS = (1, 2, 4)
-#: The fit uses samples below this fraction of the motor's top speed (its 99th percentile):
-#: the gear's torque stays quasi-static there (inertia times the error's acceleration);
-#: nearer the joint's resonance the closed loop shapes it.
+#: The fit uses samples below this fraction of the motor's top speed (its 99th percentile),
+#: or the slowest that cover :data:`MIN_REVOLUTIONS`: the gear's torque stays quasi-static
+#: there (inertia times the error's acceleration); nearer the joint's resonance the closed
+#: loop shapes it.
 FIT_SPEED_FRACTION = 0.5
 #: A sample turns when the motor's speed exceeds this fraction of its top speed: the fit
 #: leaves out rests and reversals, where the angle stands still and no order is defined.
 MOVING_FRACTION = 0.02
 #: The centred window [s] of the speed (and of the acceleration) the fit reads.
 SPEED_WINDOW_S = 0.01
-#: Fewer motor revolutions than this in the fitted samples give no map worth a score.
+#: The fit covers at least this many motor revolutions (every order of a revolution seen
+#: twice); a log that turns less has no score.
 MIN_REVOLUTIONS = 2.0
 #: Relative ridge on the fit's normal equations (columns scaled to unit RMS): it keeps a
 #: regressor that the log does not excite (a load that never changes) from blowing up.
@@ -74,10 +76,8 @@ def rebuilt_torque(strain: np.ndarray, encoder_angle: np.ndarray, reference: np.
     (a, b), *_ = np.linalg.lstsq(np.column_stack([strain, np.ones_like(strain)]), ref, rcond=None)
     x = a * strain + b
     speed = _centred_rate(theta, fs)
-    top = float(np.percentile(np.abs(speed), 99)) if len(speed) else 0.0
-    fit = (np.abs(speed) > MOVING_FRACTION * top) & (np.abs(speed) < FIT_SPEED_FRACTION * top)
-    turns = np.sum(np.abs(np.diff(theta))[fit[1:] & fit[:-1]]) / (2 * np.pi)
-    if not top > 0 or turns < MIN_REVOLUTIONS:
+    fit = _fitted_samples(theta, np.abs(speed))
+    if fit is None:
         return None
     ripple = _ripple_columns(theta, ref)
     gear = _gear_columns(theta, speed, _centred_rate(speed, fs))
@@ -88,6 +88,24 @@ def rebuilt_torque(strain: np.ndarray, encoder_angle: np.ndarray, reference: np.
     coef = np.linalg.solve(normal + RIDGE * np.trace(normal) / len(normal) * np.eye(len(normal)),
                            scaled.T @ (x - ref)[fit]) / scale
     return x - ripple @ coef[2: 2 + ripple.shape[1]]
+
+
+def _fitted_samples(theta: np.ndarray, speed: np.ndarray) -> np.ndarray | None:
+    """The samples the fit uses: those that turn (above :data:`MOVING_FRACTION` of the top
+    speed) below :data:`FIT_SPEED_FRACTION` of it, or, where those cover fewer than
+    :data:`MIN_REVOLUTIONS` revolutions (a short move of a low-ratio joint), the slowest that
+    do; None if all of them do not."""
+    top = float(np.percentile(speed, 99)) if len(speed) else 0.0
+    travel = np.concatenate([[0.0], np.abs(np.diff(theta))])
+    turning = np.flatnonzero(speed > MOVING_FRACTION * top) if top > 0 else np.zeros(0, int)
+    if travel[turning].sum() < 2 * np.pi * MIN_REVOLUTIONS:
+        return None
+    by_speed = turning[np.argsort(speed[turning], kind="stable")]
+    enough = int(np.searchsorted(np.cumsum(travel[by_speed]), 2 * np.pi * MIN_REVOLUTIONS))
+    limit = max(FIT_SPEED_FRACTION * top, float(speed[by_speed[min(enough, len(by_speed) - 1)]]))
+    fit = np.zeros(len(speed), bool)
+    fit[turning] = speed[turning] <= limit
+    return fit
 
 
 def _ripple_columns(theta: np.ndarray, load: np.ndarray) -> np.ndarray:
@@ -115,3 +133,18 @@ def rms_error_rebuilt_nm(estimate: np.ndarray, rebuilt: np.ndarray | None) -> fl
         return float("nan")
     error = np.asarray(estimate, float) - rebuilt
     return float(np.sqrt(np.mean(error * error)))
+
+
+#: The result column of :func:`reference_scores` (empty on rows of a log without a model reference).
+REFERENCE_COLUMNS = ("rms_error_rebuilt_nm",)
+
+
+def reference_scores(estimate: np.ndarray, truth) -> dict[str, float]:
+    """:data:`REFERENCE_COLUMNS` of a row: with a model reference (``truth.reference_kind``),
+    the error against the torque rebuilt from the strain, computed once per log; else NaN."""
+    if truth.reference_kind != "model" or truth.torque_ref is None or truth.strain is None \
+            or truth.encoder_angle is None:
+        return {"rms_error_rebuilt_nm": float("nan")}
+    rebuilt = truth.remembered("rebuilt", lambda: rebuilt_torque(truth.strain, truth.encoder_angle,
+                                                                 truth.torque_ref, truth.fs))
+    return {"rms_error_rebuilt_nm": rms_error_rebuilt_nm(estimate, rebuilt)}

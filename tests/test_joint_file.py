@@ -245,7 +245,7 @@ def test_lab_columns_and_their_joint_file_read_back_as_the_log(tmp_path):
     log = make_log(JointSpec(counts_per_rev=97), {**frame.to_dict("series"), "index": frame.encoder % 97 == 0,
                                                  "torque_true": frame.torque_ref})
     for kind, column in (("transducer", "torque_sensor_Nm"), ("model", "model_torque_Nm")):
-        columns = lab_columns(log, log.torque_ref, kind)
+        columns = lab_columns(log, kind)
         assert list(columns) == ["t", "strain_mV", "enc_counts", "i_motor_A", "idx", column]   # no truth
         write_columns(columns, tmp_path / f"{kind}.csv")
         (tmp_path / kind).mkdir()

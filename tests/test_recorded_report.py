@@ -45,7 +45,7 @@ def test_a_log_without_reference_is_ranked_by_the_ripple_left_with_each_columns_
     assert "neither `torque_true` nor `torque_ref`" in text and "n/a" not in table[1]
     # shares of raw's ripple removed, from the rows: 1 - 0.2/1, 1 - 0.6/1
     assert "`order-tracking` 80%, `lowpass` 40%" in text
-    assert "What the truth-free columns cannot tell" in text
+    assert "What the scores cannot tell" in text
 
 
 def test_a_log_without_two_revolutions_is_ranked_by_the_delay_and_without_any_score_not_at_all():

@@ -186,7 +186,7 @@ def _run(args, start: float) -> int:
                            on_start=started, executor=executor(args), sealed=args.sealed)
     from rippleb.report.recorded import run_summary
 
-    print(run_summary(frame))
+    print(run_summary(frame, getattr(args, "joint_values", None)))
     counts = frame["status"].value_counts().to_dict() if len(frame) else {}
     print(f"\n{len(frame)} rows ({', '.join(f'{v} {k}' for k, v in counts.items()) or 'none'}) "
           f"in {args.out_dir / 'results.csv'}; total wall time {time.perf_counter() - start:.1f} s")

@@ -87,11 +87,11 @@ def _write_lab(sim, out: Path, kind: str) -> Path:
     """The log in the lab's columns with the reference of ``kind``, and ``joint.toml`` beside it."""
     from rippleb.data import write_columns
     from rippleb.lab_format import joint_toml, lab_columns, write_joint_toml
-    from rippleb.simulator.transducer import lab_reference
+    from rippleb.simulator.transducer import lab_log
 
-    log = sim.log
+    log = lab_log(sim, kind)
     joint = write_joint_toml(joint_toml(log.spec, log.index is not None, kind), out.parent / "joint.toml")
-    path = write_columns(lab_columns(log, lab_reference(sim, kind), kind), out)
+    path = write_columns(lab_columns(log, kind), out)
     print(f"wrote {path} and {joint}")
     return path
 

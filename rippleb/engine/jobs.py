@@ -28,7 +28,7 @@ import numpy as np
 
 from rippleb.engine.cache import Artefact, load_log, log_bytes, pack, store
 from rippleb.data import SensorLog
-from rippleb import metrics, truthfree
+from rippleb import metrics, rebuilt, truthfree
 from rippleb.metrics import Truth
 from rippleb.registry import one_line
 from rippleb.scorable import NO_REFERENCE, NO_REFERENCE_MESSAGE, implausible
@@ -196,9 +196,10 @@ def check_estimate(arrays: dict, n_samples: int, n_ticks: int) -> tuple[np.ndarr
 
 
 def score_or_invalid(estimate: np.ndarray, truth: Truth) -> dict:
-    """The accuracy columns of an estimate (:func:`rippleb.metrics.score`) and its truth-free
-    columns (:func:`rippleb.truthfree.truth_free_scores`), or, when they
-    cannot stand as an ``ok`` row, ``{"status": "invalid", "message": why}``.
+    """The accuracy columns of an estimate (:func:`rippleb.metrics.score`), its truth-free
+    columns (:func:`rippleb.truthfree.truth_free_scores`) and, on a log with a model
+    reference, its error against the rebuilt torque (:func:`rippleb.rebuilt.reference_scores`);
+    or, when they cannot stand as an ``ok`` row, ``{"status": "invalid", "message": why}``.
 
     Every accuracy column must be finite or NaN (NaN: not defined for this log, e.g. no
     ``torque_true`` in a recording), and the errors against each reference the log has must
@@ -211,7 +212,8 @@ def score_or_invalid(estimate: np.ndarray, truth: Truth) -> dict:
     if why:
         return {"status": "invalid", "message": why}
     with np.errstate(over="ignore", invalid="ignore"):
-        scores = {**metrics.score(estimate, truth), **truthfree.truth_free_scores(estimate, truth)}
+        scores = {**metrics.score(estimate, truth), **truthfree.truth_free_scores(estimate, truth),
+                  **rebuilt.reference_scores(estimate, truth)}
     needed = {c for c, ref in (("rms_error_nm", truth.torque_true), ("max_error_nm", truth.torque_true),
                                 ("rms_error_ref_nm", truth.torque_ref), ("max_error_ref_nm", truth.torque_ref))
               if ref is not None}

@@ -136,9 +136,10 @@ def matrix_markdown(frame, column: str) -> str:
     return markdown(lines, ["method"] + scenarios)
 
 
-def timing_cells(frame):
+def timing_cells(frame, rows=None):
     """Per method x scenario: medians over seeds of ``us_per_tick_p50`` and ``_p99`` and
-    whether the cell is noisy (:data:`NOISY_SPREAD`, :data:`NOISY_TAIL`).
+    whether the cell is noisy (:data:`NOISY_SPREAD`, :data:`NOISY_TAIL`), over ``rows``
+    (default: the ok rows of ``frame``; a recording's ``no-reference`` rows are timed too).
 
     Returns
     -------
@@ -148,7 +149,8 @@ def timing_cells(frame):
     import pandas as pd
 
     records = []
-    for (method, scenario), group in ok_rows(frame).groupby(["method", "scenario"], sort=False):
+    for (method, scenario), group in (ok_rows(frame) if rows is None else rows).groupby(["method", "scenario"],
+                                                                                        sort=False):
         p50 = group["us_per_tick_p50"].dropna() if "us_per_tick_p50" in group else pd.Series(dtype=float)
         p99 = group["us_per_tick_p99"].dropna()
         if p99.empty:

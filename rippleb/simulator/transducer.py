@@ -53,10 +53,15 @@ def reading(torque_true: np.ndarray, fs: float, seed: int, scenario: str) -> np.
     return filtered + stream(seed, scenario, "transducer").normal(0.0, NOISE_NM, len(torque))
 
 
-def lab_reference(sim, kind: str) -> np.ndarray:
-    """The reference [Nm] of ``kind`` a lab log of the simulation ``sim`` carries
-    (:data:`rippleb.joint_file.REFERENCE_KINDS`): the flange's :func:`reading` of the true
-    torque, or eq. (7)'s model torque (the simulator's ``torque_ref``)."""
-    if kind == "model":
-        return sim.log.torque_ref
-    return reading(sim.log.torque_true, sim.log.spec.fs, int(sim.log.meta["seed"]), sim.scenario.name)
+def lab_log(sim, kind: str):
+    """The log of the simulation ``sim`` as a lab with a reference of ``kind`` records it
+    (:data:`rippleb.joint_file.REFERENCE_KINDS`): its ``torque_ref`` is the flange's
+    :func:`reading` of the true torque, or eq. (7)'s model torque (the simulator's own
+    ``torque_ref``), and ``meta["reference_kind"]`` says which. ``torque_true`` stays for
+    the one who scores it; :func:`rippleb.lab_format.lab_columns` leaves it out of a file."""
+    import dataclasses
+
+    log = sim.log
+    reference = log.torque_ref if kind == "model" else reading(log.torque_true, log.spec.fs,
+                                                               int(log.meta["seed"]), sim.scenario.name)
+    return dataclasses.replace(log, torque_ref=reference, meta={**log.meta, "reference_kind": kind})

@@ -66,18 +66,20 @@ def test_daq_names_and_units_are_read_through_the_joint_file(tmp_path, monkeypat
                                plain.sort_values("method").rms_error_ref_nm, rtol=1e-6, atol=1e-9)
 
 
-def test_mv_against_v_is_invalid_with_a_message_not_a_number(tmp_path, monkeypatch, capsys):
+def test_mv_against_v_is_one_line_naming_the_strain_not_a_ranking(tmp_path, monkeypatch, capsys):
+    """Issue 39: strain in V labelled mV ran every method, 13 of 14 rows invalid, exit 0 and
+    current-based printed 'rank 1'; now the log is refused before any row runs."""
     frame = _frame()
     frame.assign(strain=frame.strain * 1e3).to_csv(tmp_path / "rec.csv", index=False)   # mV, unsaid
     _frame(int(1.2 * FS), seed=1).to_csv(tmp_path / "cal.csv", index=False)                # V
     code, err, rows = _run(tmp_path, monkeypatch, capsys, "--log", "rec.csv", "--calibration", "cal.csv")
-    assert code == 0, err
-    assert (rows.status == "invalid").all(), rows[["method", "status", "message"]]
-    assert rows.message.str.contains("beyond 510 Nm").all() and rows.rms_error_ref_nm.isna().all()
+    assert code == 2 and err.count("\n") == 1 and rows is None, err
+    assert err.startswith("rippleb: error: rec.csv: column strain ('strain' in V): calibrated as the calibration "
+                          "log's strain, it reads up to "), err
+    assert "the two logs' strain units differ (strain in V labelled mV reads 1000 times too large)" in err
     (tmp_path / "rec.toml").write_text('[joint.columns]\nstrain = {column = "strain", unit = "mV"}\n')
-    os.rename(tmp_path / "out", tmp_path / "first")
     code, err, rows = _run(tmp_path, monkeypatch, capsys, "--log", "rec.csv", "--calibration", "cal.csv")
-    assert (rows.status == "ok").all() and (rows.rms_error_ref_nm < 1.0).all(), rows   # its sidecar says mV
+    assert code == 0 and (rows.status == "ok").all() and (rows.rms_error_ref_nm < 1.0).all(), rows   # its sidecar says mV
 
 
 def test_a_log_without_reference_says_what_can_and_cannot_be_scored(tmp_path, monkeypatch, capsys):

@@ -184,15 +184,30 @@ def _run(args, start: float) -> int:
                            conditions=args.conditions, seed_start=args.seed_start or 0, jobs=args.jobs,
                            out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress,
                            on_start=started, executor=executor(args), sealed=args.sealed)
+    from rippleb.report.provenance import read_run_provenance
     from rippleb.report.recorded import run_summary
 
-    print(run_summary(frame, getattr(args, "joint_values", None)))
+    joint = read_run_provenance(args.out_dir).get("joint") if args.log is not None and len(frame) else None
+    print(run_summary(frame, joint))
     counts = frame["status"].value_counts().to_dict() if len(frame) else {}
     print(f"\n{len(frame)} rows ({', '.join(f'{v} {k}' for k, v in counts.items()) or 'none'}) "
           f"in {args.out_dir / 'results.csv'}; total wall time {time.perf_counter() - start:.1f} s")
     print(f"Next: rippleb report {args.out_dir} (tables with intervals, figures; --html for the "
           f"interactive page)")
-    return report_broken_plugins(frame)
+    return max(report_broken_plugins(frame), report_nothing_measured(frame))
+
+
+def report_nothing_measured(frame) -> int:
+    """One stderr line and exit 1 when rows ran but none was measured (every one ``error``,
+    ``invalid`` or ``timeout``): the run holds no result to compare; else 0."""
+    from rippleb.scorable import MEASURED
+
+    if not len(frame) or frame["status"].isin(MEASURED).any():
+        return 0
+    counts = ", ".join(f"{v} {k}" for k, v in frame["status"].value_counts().items())
+    print(f"rippleb: error: no row was measured ({counts}): nothing to rank; each row's message says why",
+          file=sys.stderr)
+    return 1
 
 
 def _warn_other_environment(run_dir: Path) -> None:

@@ -8,17 +8,16 @@ the true torque it is worse (issue 39: `fourier-lms` 1st against eq. (7), 12th a
 truth). So a log with a model reference is ranked by the error against the torque
 **rebuilt** from its strain (:func:`rebuilt_torque`), which keeps that torque:
 
-1. the strain calibrated on the reference over the log, ``x = a strain + b`` (least squares);
-2. the gauges' ripple in it: a function of the wave-generator angle ``theta`` and the load,
-   orders 1-8 (:data:`ORDERS`), each affine in the load (the reference), fitted to
-   ``x - reference`` beside what the gear's torque can be: an inertial torque locked to the
-   angle, which grows with the motor speed squared and its acceleration and vanishes at rest
-   (:data:`GEAR_ORDERS`; docs/physics.md, "Transmission error"). The fit uses the samples
-   where the motor turns below half its top speed (:data:`FIT_SPEED_FRACTION`), where that
-   inertial form holds; the model's own error (a slow torque) is absorbed by an offset and
-   a gain term;
-3. the rebuilt torque is ``x`` minus the fitted ripple alone: the gear's torque, the model's
-   error and everything else the strain shows stay in it.
+1. one least-squares fit of the reference by the strain's gain and offset, the gauges'
+   ripple (a function of the wave-generator angle ``theta`` and the load: orders 1-8,
+   :data:`ORDERS`, each affine in the load, the reference) and what the gear's torque can be
+   (an inertial torque locked to the angle, which grows with the motor speed squared and its
+   acceleration and vanishes at rest: :data:`GEAR_ORDERS`; docs/physics.md, "Transmission
+   error"), over the rests and the samples where the motor turns below half its top speed
+   (:data:`FIT_SPEED_FRACTION`), where that inertial form holds;
+2. the rebuilt torque is the calibrated strain minus the fitted ripple: the gear's torque,
+   which the reference lacks, stays in it, and so does everything else the strain shows that
+   is no ripple (the model's own error falls to the fit's residual, not to the rebuilt torque).
 
 :func:`rms_error_rebuilt_nm` is the RMS of the estimate against it over the log. What it
 cannot tell (docs/metrics.md, "Scores against a reference"): an error every strain-based
@@ -44,8 +43,8 @@ GEAR_ORDERS = (1, 2, 4)
 #: there (inertia times the error's acceleration); nearer the joint's resonance the closed
 #: loop shapes it.
 FIT_SPEED_FRACTION = 0.5
-#: A sample turns when the motor's speed exceeds this fraction of its top speed: the fit
-#: leaves out rests and reversals, where the angle stands still and no order is defined.
+#: A sample turns when the motor's speed exceeds this fraction of its top speed: the
+#: revolutions the fit needs are counted over the samples that turn.
 MOVING_FRACTION = 0.02
 #: The centred window [s] of the speed (and of the acceleration) the fit reads.
 SPEED_WINDOW_S = 0.01
@@ -71,30 +70,35 @@ def _centred_rate(values: np.ndarray, fs: float, window_s: float = SPEED_WINDOW_
 def rebuilt_torque(strain: np.ndarray, encoder_angle: np.ndarray, reference: np.ndarray,
                    fs: float) -> np.ndarray | None:
     """The torque rebuilt from the strain (module docstring); None when the log turns less
-    than :data:`MIN_REVOLUTIONS` revolutions in the fitted samples."""
+    than :data:`MIN_REVOLUTIONS` revolutions.
+
+    One least-squares fit over the samples of :func:`_fitted_samples`: ``reference ~= a strain
+    + b + ripple(theta, reference) + gear(theta, speed, acceleration)``, the ripple's and the
+    gear's columns as :func:`_ripple_columns` and :func:`_gear_columns` give them. What the
+    reference lacks, the gear's torque above all, goes to the gear's columns and to the
+    residual; the rebuilt torque is ``a strain + b + ripple``: the calibrated strain without
+    the gauges' ripple, the gear's torque kept.
+    """
     strain, theta, ref = (np.asarray(v, float) for v in (strain, encoder_angle, reference))
-    (a, b), *_ = np.linalg.lstsq(np.column_stack([strain, np.ones_like(strain)]), ref, rcond=None)
-    x = a * strain + b
     speed = _centred_rate(theta, fs)
     fit = _fitted_samples(theta, np.abs(speed))
     if fit is None:
         return None
-    ripple = _ripple_columns(theta, ref)
-    gear = _gear_columns(theta, speed, _centred_rate(speed, fs))
-    design = np.column_stack([np.ones_like(x), ref, ripple, gear])
+    kept = np.column_stack([strain, np.ones_like(strain), _ripple_columns(theta, ref)])
+    design = np.column_stack([kept, _gear_columns(theta, speed, _centred_rate(speed, fs))])
     scale = np.sqrt(np.mean(design[fit] ** 2, axis=0)) + 1e-300
     scaled = design[fit] / scale
     normal = scaled.T @ scaled
     coef = np.linalg.solve(normal + RIDGE * np.trace(normal) / len(normal) * np.eye(len(normal)),
-                           scaled.T @ (x - ref)[fit]) / scale
-    return x - ripple @ coef[2: 2 + ripple.shape[1]]
+                           scaled.T @ ref[fit]) / scale
+    return kept @ coef[: kept.shape[1]]
 
 
 def _fitted_samples(theta: np.ndarray, speed: np.ndarray) -> np.ndarray | None:
-    """The samples the fit uses: those that turn (above :data:`MOVING_FRACTION` of the top
-    speed) below :data:`FIT_SPEED_FRACTION` of it, or, where those cover fewer than
-    :data:`MIN_REVOLUTIONS` revolutions (a short move of a low-ratio joint), the slowest that
-    do; None if all of them do not."""
+    """The samples the fit uses: the rests and the samples below :data:`FIT_SPEED_FRACTION` of
+    the top speed, or, where those that turn (above :data:`MOVING_FRACTION` of it) cover fewer
+    than :data:`MIN_REVOLUTIONS` revolutions (a short move of a low-ratio joint), up to the
+    speed at which they do; None if all of them do not."""
     top = float(np.percentile(speed, 99)) if len(speed) else 0.0
     travel = np.concatenate([[0.0], np.abs(np.diff(theta))])
     turning = np.flatnonzero(speed > MOVING_FRACTION * top) if top > 0 else np.zeros(0, int)
@@ -103,9 +107,7 @@ def _fitted_samples(theta: np.ndarray, speed: np.ndarray) -> np.ndarray | None:
     by_speed = turning[np.argsort(speed[turning], kind="stable")]
     enough = int(np.searchsorted(np.cumsum(travel[by_speed]), 2 * np.pi * MIN_REVOLUTIONS))
     limit = max(FIT_SPEED_FRACTION * top, float(speed[by_speed[min(enough, len(by_speed) - 1)]]))
-    fit = np.zeros(len(speed), bool)
-    fit[turning] = speed[turning] <= limit
-    return fit
+    return speed <= limit   # the rests too: the gear's torque vanishes there, the ripple is the map's
 
 
 def _ripple_columns(theta: np.ndarray, load: np.ndarray) -> np.ndarray:

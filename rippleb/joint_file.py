@@ -295,7 +295,7 @@ def describe(spec, joint: JointDescription, units: dict, index_used: bool, *,
     appended to its line."""
     notes = notes or {}
     default = "given as read_log's spec" if spec_given else "ASSUMED (rippleb's default)"
-    rate_origin = default if spec_given else "from column t: the rate of its steps of one sample period"
+    rate_origin = default if spec_given else "from column t: the rate of its clock"
     lines = [f"  fs = {spec.fs:.6g} Hz ({rate_origin}{_note(notes, 'fs')})"]
     for key in JOINT_KEYS:
         value = index_used if key == "index_pulse" else getattr(spec, key)

@@ -31,7 +31,7 @@ import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb
 import numpy as np
 
 from rippleb.methods.angle_adaptive import AngleAdaptive, rotation
-from rippleb.metrics import Truth, score
+from rippleb.scoring.metrics import Truth, score
 from rippleb.simulator import simulate
 
 MEMORY_REVS = (3.0, 10.0, 30.0, 100.0)

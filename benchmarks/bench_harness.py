@@ -1,7 +1,7 @@
 """Harness overhead per control tick, with a no-op method (target: median <= 5 us).
 
 Run: ``python -m pytest benchmarks/bench_harness.py --benchmark-enable``. The benchmark
-times one whole :func:`rippleb.streaming.stream` over 4000 ticks; ``extra_info`` holds
+times one whole :func:`rippleb.harness.stream` over 4000 ticks; ``extra_info`` holds
 the per-tick figure (total / ticks), which includes the method call itself (an empty
 Python method, ~0.1 us).
 """
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from rippleb import JointSpec, Method, make_log
-from rippleb.streaming import prepare_blocks, stream
+from rippleb.harness import prepare_blocks, stream
 
 TICKS = 4000
 

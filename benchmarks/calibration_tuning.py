@@ -4,7 +4,8 @@ One procedure for every method, so each gets the same effort: for each point of 
 method's grid, fit on the calibration log of each seed and score the estimate on that same
 log against ``torque_ref`` (the only torque a real calibration run knows; never
 ``torque_true``, never a scored scenario), averaged over the seeds. Prints one row per grid
-point and the point of lowest mean RMS. The grids are those the method pages list.
+point and the point of lowest mean RMS. The grids are those the method pages list. Each
+point runs as ``rippleb tune`` runs it: a sandboxed row (rippleb.engine.tuner.tuning_plan).
 
 Run: ``python benchmarks/calibration_tuning.py METHOD [--seeds 100-104]``
 """
@@ -16,8 +17,10 @@ import itertools
 
 import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
 
+from rippleb.engine.runner import run_plan
+from rippleb.engine.tuner import tuning_plan
 from rippleb.registry import Registry
-from rippleb.engine.tuner import calibration_logs, mean_score
+from rippleb.variants import label
 
 #: method -> {parameter: candidates}; see each method's page in docs/methods/.
 GRIDS = {
@@ -42,16 +45,16 @@ def main(argv=None) -> None:
     parser.add_argument("--seeds", default="100-104")
     args = parser.parse_args(argv)
     lo, hi = (int(v) for v in args.seeds.split("-"))
-    sims = calibration_logs(range(lo, hi + 1))
-    cls = Registry.discover().get(args.method).load()
     grid = GRIDS[args.method]
     names = list(grid)
+    points = {label(args.method, dict(zip(names, values))): values for values in itertools.product(*grid.values())}
+    frame = run_plan(Registry.discover(), tuning_plan(list(points), range(lo, hi + 1)), jobs=2)
+    means = frame.groupby("method")[["rms_error_ref_nm", "max_error_ref_nm"]].mean()
     print("| " + " | ".join(names) + " | rms_error_ref_nm | max_error_ref_nm |")
     print("|---" * (len(names) + 2) + "|")
     rows = []
-    for values in itertools.product(*grid.values()):
-        params = dict(zip(names, values))
-        mean = mean_score(cls, params, sims)
+    for lab, values in points.items():
+        mean = means.loc[lab]
         rows.append((mean["rms_error_ref_nm"], values))
         print("| " + " | ".join(f"{v:g}" for v in values)
               + f" | {mean['rms_error_ref_nm']:.3f} | {mean['max_error_ref_nm']:.3f} |", flush=True)

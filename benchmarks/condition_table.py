@@ -19,10 +19,10 @@ import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb
 import numpy as np
 
 from rippleb.simulator.conditions import CONDITIONS
-from rippleb.metrics import Truth, score
+from rippleb.scoring.metrics import Truth, score
 from rippleb.registry import Registry
 from rippleb.simulator import simulate
-from rippleb.streaming import prepare_blocks, stream
+from rippleb.harness import prepare_blocks, stream
 
 DEFAULT_METHODS = "raw,lowpass,current-based,switched-notch,order-tracking,kalman-ripple"
 
@@ -59,7 +59,7 @@ def table(methods, scenarios, conditions, seeds, calibration="calibration") -> d
 def rms_error(fitted, sim, blocks=None) -> float:
     """``rms_error_nm`` of a copy of the ``fitted`` method streamed over ``sim``'s log as
     the runner does (``reset``, then one ``step`` per tick); ``blocks`` from
-    :func:`~rippleb.streaming.prepare_blocks` of the visible log, when already cut."""
+    :func:`~rippleb.harness.prepare_blocks` of the visible log, when already cut."""
     visible = sim.log.for_method(keep_ref=False)
     method = copy.deepcopy(fitted)
     method.reset(visible.spec)

@@ -1,25 +1,37 @@
-"""What confining a method's worker costs per job (docs/robustness.md section 9).
+"""What the walls around a method's worker cost per job (docs/robustness.md, sections 10 and 11).
 
     python benchmarks/confine_overhead.py [JOBS]
+    python benchmarks/confine_overhead.py --steps [FORKS]
 
-Runs JOBS trivial jobs through a two-slot :class:`rippleb.engine.pool.Pool` as rippleb's
-own jobs run (``confine=None``: PID namespace only), as a method's ran before issue 34
-(with the walls of :mod:`rippleb.engine.sandbox` switched off: mount namespace, own
-/proc, terminals covered, a directory read-only, and since issue 34 a tmpfs as its scratch
-directory) and as a method's runs now
-(the same, then a second user namespace, Landlock, seccomp, no capabilities), in alternating batches of 20, and prints the median wall time per job of each.
+Runs trivial jobs through a two-slot :class:`rippleb.engine.process.pool.Pool`, in alternating
+batches of 20, four ways: as rippleb's own jobs run (``confine=None``: user and PID
+namespaces only); as a method's with the mounts alone (section 9: its own /proc, terminals
+covered, a directory read-only, a tmpfs as its scratch directory); with issue 34's walls
+too (a second user namespace, Landlock on writes, seccomp, no capabilities: reads and the
+network open); and with issue 41's (reads confined to the libraries and its package, its own
+network namespace, Landlock's network rules and scopes, the runner's environment wiped, a
+control group capping its processes), and issue 34's with each of issue 41's alone. Prints
+the median wall time per job of each, and the differences.
+
+``--steps`` times each of issue 41's steps as a keeper or worker first runs it, in a fresh
+fork of this process (its pages shared with the parent, as a job's are), FORKS times each,
+alternating, and prints the medians: a batch's differences above are within the load's
+noise on a shared machine, these are not.
 """
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import statistics
 import sys
 import tempfile
 import time
 
 import rippleb  # noqa: F401 - before numpy: the portable numeric paths
-from rippleb.engine.isolation import Confinement
-from rippleb.engine.pool import Pool
+from rippleb.engine.process import isolation, landlock, sandbox, scrub, tasks
+from rippleb.engine.process.isolation import Confinement
+from rippleb.engine.process.pool import Pool
 
 
 def _nothing() -> bytes:
@@ -40,33 +52,100 @@ def batch(confine, n: int = 20) -> float:
     return (time.perf_counter() - start) / n
 
 
-def walled(on: bool, confine, n: int = 20) -> float:
-    """:func:`batch` of a method's jobs, with or without the walls of issue 34."""
-    from rippleb.engine import sandbox
+#: What each of issue 41's walls adds, switched on alone over issue 34's.
+STEPS = ("network", "reads", "environment", "process cap")
 
-    lock_down, wipe = sandbox.lock_down, sandbox.wipe_command_line
-    if not on:
-        sandbox.lock_down, sandbox.wipe_command_line = (lambda *args, **kwargs: []), (lambda: None)
+
+@contextlib.contextmanager
+def walls(level: str, extra: tuple = ()):
+    """``mounts`` (no walls), ``issue34`` (writes only, the network open; with ``extra``, those
+    of :data:`STEPS` on as well) or ``issue41`` (all of them)."""
+    saved = (sandbox.lock_down, scrub.wipe_command_line, scrub.scrub_environment, landlock.restrict,
+             isolation.NAMESPACE_CHOICES, tasks.enter)
+    if level == "mounts":
+        sandbox.lock_down, scrub.wipe_command_line = (lambda *args, **kwargs: []), (lambda: None)
+    if level in ("mounts", "issue34"):
+        if "environment" not in extra:
+            scrub.scrub_environment = lambda: None
+        if "process cap" not in extra:
+            tasks.enter = lambda limit: None
+        if "reads" not in extra:
+            landlock.restrict = functools.partial(saved[3], reads=False)
+        if "network" not in extra:
+            isolation.NAMESPACE_CHOICES = tuple(c for c in isolation.NAMESPACE_CHOICES if not c[1].net)
     try:
-        return batch(confine, n)
+        yield
     finally:
-        sandbox.lock_down, sandbox.wipe_command_line = lock_down, wipe
+        (sandbox.lock_down, scrub.wipe_command_line, scrub.scrub_environment, landlock.restrict,
+         isolation.NAMESPACE_CHOICES, tasks.enter) = saved
+
+
+def _in_fork(step) -> float:
+    """Milliseconds ``step()`` takes as the first thing a fresh fork of this process does."""
+    import gc
+    import os
+
+    read, write = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        try:
+            gc.freeze()   # as a keeper and a worker do first
+            start = time.perf_counter_ns()
+            step()
+            os.write(write, str(time.perf_counter_ns() - start).encode())
+        finally:
+            os._exit(0)
+    os.close(write)
+    with os.fdopen(read) as fh:
+        spent = int(fh.read() or -1)
+    os.waitpid(pid, 0)
+    tasks.remove(pid)   # as the keeper's parent does once it has reaped it
+    return spent / 1e6
+
+
+def steps(forks: int) -> None:
+    """The medians of :func:`_in_fork` for each step (module docstring)."""
+    scratch = tempfile.mkdtemp(prefix="rippleb-scratch-")
+    flags = isolation.CLONE_NEWUSER | isolation.CLONE_NEWPID | isolation.CLONE_NEWNS
+    timed = {
+        "namespaces (user, PID, mount), as issue 34": lambda: isolation.libc().unshare(flags),
+        "namespaces with a network one, as now": lambda: isolation.libc().unshare(flags | isolation.CLONE_NEWNET),
+        "Landlock on writes, as issue 34": lambda: landlock.restrict(scratch, (), True, reads=False),
+        "Landlock on reads, writes, TCP and scopes, as now": lambda: landlock.restrict(scratch, (scratch,), True),
+        "the environment wiped": scrub.scrub_environment,
+        "the job's control group joined (root only)": lambda: tasks.enter(sandbox.MAX_TASKS + 1),
+    }
+    spent = {name: [] for name in timed}
+    for _ in range(forks):
+        for name, step in timed.items():
+            spent[name].append(_in_fork(step))
+    for name, values in spent.items():
+        print(f"{name}: {statistics.median(values):.3f} ms (median of {forks})")
 
 
 def main() -> None:
+    if sys.argv[1:2] == ["--steps"]:
+        steps(int(sys.argv[2]) if len(sys.argv) > 2 else 40)
+        return
     jobs = int(sys.argv[1]) if len(sys.argv) > 1 else 400
     run_dir = tempfile.mkdtemp(prefix="rippleb-confine-")
     # as a run confines a method's job: its run directory read-only, a scratch directory of the run's
     confine = Confinement.of([run_dir], [], tempfile.mkdtemp(prefix="rippleb-scratch-"))
-    plain, mounts, walls = [], [], []
-    for _ in range(max(1, jobs // 60)):
-        plain.append(batch(None))
-        mounts.append(walled(False, confine))
-        walls.append(walled(True, confine))
-    p, m, w = (statistics.median(times) for times in (plain, mounts, walls))
-    print(f"{jobs} jobs of each: rippleb's own {p * 1e3:.2f} ms/job; a method's with the mounts only (section 9, and its scratch tmpfs) "
-          f"{m * 1e3:.2f} ms/job (+{(m - p) * 1e3:.2f} ms); with the walls {w * 1e3:.2f} ms/job "
-          f"(+{(w - p) * 1e3:.2f} ms; the walls +{(w - m) * 1e3:.2f} ms)")
+    levels = [("own", None, ()), ("mounts", "mounts", ()), ("issue34", "issue34", ()),
+              *((f"+{step}", "issue34", (step,)) for step in STEPS), ("issue41", "issue41", ())]
+    times = {name: [] for name, _, _ in levels}
+    for _ in range(max(1, jobs // (20 * len(levels)))):
+        for name, level, extra in levels:
+            if level is None:
+                times[name].append(batch(None))
+                continue
+            with walls(level, extra):
+                times[name].append(batch(confine))
+    ms = {k: statistics.median(v) * 1e3 for k, v in times.items()}
+    print(f"{len(times['own']) * 20} jobs of each (median of batches of 20): rippleb's own {ms['own']:.2f} ms/job; "
+          f"a method's with the mounts only {ms['mounts']:.2f} ms; with issue 34's walls {ms['issue34']:.2f} ms; "
+          f"with issue 41's {ms['issue41']:.2f} ms (+{ms['issue41'] - ms['issue34']:.2f} ms); each of issue 41's "
+          f"alone over issue 34's: " + ", ".join(f"{s} {ms['+' + s] - ms['issue34']:+.2f} ms" for s in STEPS))
 
 
 if __name__ == "__main__":

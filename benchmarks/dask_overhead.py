@@ -1,7 +1,7 @@
 """Per-row scheduling overhead of the Dask executor, against the round trip of a no-op.
 
 Starts a LocalCluster of 2 single-thread workers, then streams N tasks through the
-executor's own submission loop (:func:`rippleb.engine.dask_executor._stream`, bounded in flight,
+executor's own submission loop (:func:`rippleb.engine.dask.executor._stream`, bounded in flight,
 one seed per worker) twice: tasks whose function returns at once (the executor's own
 overhead: serialising the scenario objects, scheduling, the result's trip back and the
 client's bookkeeping), and the same number of bare ``client.submit`` no-ops (dask's floor).
@@ -13,7 +13,7 @@ import time
 
 from distributed import Client, LocalCluster
 
-from rippleb.engine import dask_executor
+from rippleb.engine.dask import executor as dask_executor
 from rippleb.engine.executors import RowTask
 from rippleb.engine.rows import RowKey
 from rippleb.scenario import load_scenario

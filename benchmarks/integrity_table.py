@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from test_integrity import HOSTILE, NAPPER, SLOW_IMPORT, _dist, napping  # noqa: E402
+from test_integrity import HOSTILE, NAPPER, SLOW_IMPORT, _dist, nap, napping  # noqa: E402
 from test_integrity_inputs import SCENARIO  # noqa: E402
 
 RUN = ["run", "--seeds", "1", "--jobs", "2", "--no-progress"]
@@ -34,7 +34,7 @@ RUN = ["run", "--seeds", "1", "--jobs", "2", "--no-progress"]
 
 class Case:
     def __init__(self, root: Path | None, site: Path):
-        self.dir = Path(tempfile.mkdtemp(prefix="rippleb-case-"))
+        self.dir, self.site = Path(tempfile.mkdtemp(prefix="rippleb-case-")), site
         paths = [str(site)] + ([str(root)] if root else []) + [os.environ.get("PYTHONPATH", "")]
         self.env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths), "TMPDIR": str(self.dir),
                     "HOSTILE_PIDS": str(self.dir / "pids")}
@@ -235,13 +235,14 @@ def resume_environmental(c):
 def interrupted_early(c):
     args = [sys.executable, "-m", "rippleb", *RUN, "--methods", "napper,raw", "--scenarios", "static-contact",
             "--out", "out"]
-    proc = subprocess.Popen(args, env={**c.env, "HOSTILE_NAP": "1"}, cwd=c.dir, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
-    deadline = time.monotonic() + 120
-    while not napping(Path(c.dir) / "out") and time.monotonic() < deadline:
-        time.sleep(0.05)
-    proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=60)
+    with nap(c.site):
+        proc = subprocess.Popen(args, env=c.env, cwd=c.dir, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, start_new_session=True)
+        deadline = time.monotonic() + 120
+        while not napping(Path(c.dir) / "out") and time.monotonic() < deadline:
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
     code, resumed = c.cli("run", "--resume", "out", "--no-progress")
     return [proc.returncode, code], f"{_last_line(err)} / resume: {resumed or _short(c.rows())}"
 

@@ -9,9 +9,9 @@ import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb
 import numpy as np
 
 from rippleb.methods.lowpass import Lowpass
-from rippleb.metrics import Truth, score
+from rippleb.scoring.metrics import Truth, score
 from rippleb.simulator import simulate
-from rippleb.streaming import run_method
+from rippleb.harness import run_method
 
 CUTOFFS_HZ = (2, 5, 10, 20, 30, 50, 100, 200)
 

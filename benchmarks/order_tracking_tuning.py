@@ -19,7 +19,7 @@ import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb
 import numpy as np
 
 from rippleb.methods.order_tracking import OrderTracking
-from rippleb.metrics import Truth, score
+from rippleb.scoring.metrics import Truth, score
 from rippleb.simulator import simulate
 
 QS = (3, 5, 10, 15, 20, 30, 50)

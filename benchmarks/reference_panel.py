@@ -7,7 +7,7 @@ same scenarios), and each is written as a lab with each kind of reference record
 (``rippleb.simulator.transducer.lab_log``, what ``rippleb simulate --format lab`` writes):
 a torque flange's reading of the true torque, or eq. (7)'s model torque. Every built-in
 method is fitted on the calibration log of that kind and streamed over the scored log
-(``rippleb.streaming.run_method``), and scored as ``rippleb run --log`` scores a recording
+(``rippleb.harness.run_method``), and scored as ``rippleb run --log`` scores a recording
 (``Truth.from_recording``, ``score_or_invalid``: the whole log, the reference of that kind)
 with ``torque_true`` kept for the true error. Per device and kind, each score's ranking of
 the ok methods is compared with their ranking by ``rms_error_nm`` (Spearman's rho,
@@ -53,13 +53,13 @@ DOCS = Path(__file__).resolve().parents[1] / "docs" / "metrics.md"
 
 def device_rows(ratio, counts, condition, seed, methods, scenario=SCENARIO) -> list[dict]:
     """The rows of one device of one joint under one condition: a row per kind and method."""
-    from rippleb.engine.jobs import score_or_invalid
+    from rippleb.scoring.row import score_or_invalid
     from rippleb.engine.sweep import swept_scenario
-    from rippleb.metrics import Truth
+    from rippleb.scoring.metrics import Truth
     from rippleb.registry import Registry
     from rippleb.simulator import simulate
     from rippleb.simulator.transducer import lab_log
-    from rippleb.streaming import run_method
+    from rippleb.harness import run_method
 
     point = {"joint.gear_ratio": float(ratio), "joint.counts_per_rev": int(counts)}
     sim = simulate(swept_scenario(scenario, point), seed, condition)

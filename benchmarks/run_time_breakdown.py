@@ -28,7 +28,7 @@ def _timed(fn) -> float:
 
 
 def breakdown(run_dir: Path) -> pd.DataFrame:
-    from rippleb.metrics import Truth, score
+    from rippleb.scoring.metrics import Truth, score
     from rippleb.engine.results import read_rows
     from rippleb.simulator import simulate
 

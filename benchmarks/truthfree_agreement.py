@@ -2,7 +2,7 @@
 
 Runs every built-in method on every scored scenario under every condition for a few
 seeds (``rippleb.run``, the same rows as the CLI), then per case (condition, scenario,
-seed) ranks the methods by each truth-free column (``rippleb/truthfree.py``; the delay by
+seed) ranks the methods by each truth-free column (``rippleb/scoring/truthfree.py``; the delay by
 its absolute value: a lead is no better than a lag) and by ``rms_error_ref_nm`` (what a
 log with a reference is ranked by), and compares each ranking with the true one
 (``rms_error_nm`` against ``torque_true``) by Spearman's rho and Kendall's tau-b
@@ -27,7 +27,7 @@ import pandas as pd
 from scipy import stats
 
 from rippleb.report.stats import condition_order, scenario_order
-from rippleb.truthfree import TRUTH_FREE_COLUMNS
+from rippleb.scoring.truthfree import TRUTH_FREE_COLUMNS
 
 TRUE = "rms_error_nm"
 MEASURES = TRUTH_FREE_COLUMNS + ("rms_error_ref_nm",)

@@ -35,7 +35,7 @@ def main(argv=None) -> None:
     import dask
     from dask_jobqueue import SLURMCluster
 
-    from rippleb.engine.dask_executor import QUIET_CONFIG, quiet_environment
+    from rippleb.engine.dask.executor import QUIET_CONFIG, quiet_environment
     from rippleb.numerics import pinned_environment
 
     args = parse_args(argv)

@@ -214,7 +214,7 @@ class AngleAdaptive(Method):
         self.scale_ = np.concatenate([np.ones(m), np.full(2 * m, float(spec.rated_torque) ** 2)])
         self.law_ = np.array([self.r_, float(self.outlier_gate),
                               self.cpr_ * float(self.memory_revs), 1.0 / self.floor_sd_nm ** 2,
-                              float(self.min_counts), float(self.max_jolt_counts)])
+                              float(self.min_counts), float(self.max_jolt_counts), np.inf])
         self.frame_ = self.home_ or 0   # angle origin in counts; the calibration's until homed
         self.homed_ = self.home_ is None  # nothing to home on without a calibration index
         self.w_ = self.map_.copy()
@@ -231,6 +231,11 @@ class AngleAdaptive(Method):
         self.ticks_phi_ = np.zeros((U + 2, m))
         self.ticks_y_ = np.zeros(U + 2)
         self.ticks_end_ = np.zeros(U + 2, dtype=np.int64)
+        # no gear model (gear-keeping has one): its coefficients, orders, speed state, ticks
+        self.gear_ = np.zeros(0)
+        self.gear_index_ = np.zeros(0, dtype=np.int64)
+        self.speed_ = np.zeros(6)
+        self.ticks_gear_ = np.zeros(U + 2)
 
     @property
     def weight_(self) -> float:
@@ -254,7 +259,7 @@ class AngleAdaptive(Method):
                self.table_, int(self.spec_.block_size), int(self.update_ticks), bool(self.adapt),
                self.law_, self.scale_, self.map_, self.w_, self.chol_, self.info_, self.vec_,
                self.scalars_, self.counters_, self.tick_phi_, self.ticks_phi_, self.ticks_y_,
-               self.ticks_end_)
+               self.ticks_end_, self.gear_, self.gear_index_, self.speed_, self.ticks_gear_)
 
     # -------------------------------------------------------------- homing
     def _homing_sample(self, block):

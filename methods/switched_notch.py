@@ -37,13 +37,12 @@ import math
 import numpy as np
 from scipy import signal
 
-from numba import types
-
 from rippleb.data import JointSpec, SensorBlock, SensorLog
-from rippleb.dsp import F8, F8_C, IN_F8, IN_I8, compiled, fit_gain_offset
+from rippleb.dsp import fit_gain_offset
 from rippleb.method import Method
+from rippleb.methods._notch_stream import (BAND, N_MARKS, OFF, ROWS, notch_stream,  # noqa: F401
+                                           select_band)
 
-OFF = -1  # band index of the pass-through state below the lowest band
 RESIDUAL = 0.1  # ripple fraction a notch may pass at a switching point (-20 dB)
 
 
@@ -155,119 +154,14 @@ def _residues(poles: np.ndarray, sections: list) -> np.ndarray:
     return out
 
 
-@compiled(types.int64(types.float64, types.int64, IN_F8, types.float64))
-def select_band(speed, current, centres, hysteresis):
-    """The band for ``speed`` [rev/s] given the ``current`` one, with hysteresis.
-
-    In the coordinate ``p = log(speed / c_0) / log(spacing)`` band ``j`` owns
-    ``|p - j| <= 0.5``; the current band is kept while ``|p - j| <= 0.5 + hysteresis``.
-    ``OFF`` (pass-through) sits at ``p = -1``.
-    """
-    spacing = math.log(centres[1] / centres[0]) if len(centres) > 1 else math.log(2.0)
-    p = math.log(max(speed, 1e-12) / centres[0]) / spacing
-    if abs(p - current) <= 0.5 + hysteresis:
-        return current
-    if current == len(centres) - 1 and p > current:
-        return current
-    return min(max(round(p), OFF), len(centres) - 1)
-
-
-#: C-contiguous arrays: contiguity lets the compiler vectorise the mode loop. ``IN_``: read-only
-#: (the bank's design), the others written in place (its state and counters).
-I8_C = types.int64[::1]
-IN_I8_C = types.Array(types.int64, 1, "C", readonly=True)
-IN_I8_2D_C = types.Array(types.int64, 2, "C", readonly=True)
-IN_F8_C = types.Array(types.float64, 1, "C", readonly=True)
-IN_F8_2D_C = types.Array(types.float64, 2, "C", readonly=True)
-#: streaming counters of :func:`notch_stream`, kept in one int64 array between calls
-BAND, PHASE, N_MARKS, OLDEST = range(4)
-
-
-@compiled(types.float64(I8_C, I8_C, types.int64, types.int64, types.float64, types.float64))
-def tick_speed(marks, at, count, tick, fs, counts_per_rev):
-    """Record ``count`` in the ring ``marks`` of the last tick ends; the speed over it [rev/s]."""
-    size = len(marks)
-    if at[N_MARKS] < size:
-        marks[(at[OLDEST] + at[N_MARKS]) % size] = count
-        at[N_MARKS] += 1
-    else:
-        marks[at[OLDEST]] = count
-        at[OLDEST] = (at[OLDEST] + 1) % size
-    span = (at[N_MARKS] - 1) * tick / fs
-    return abs(count - marks[at[OLDEST]]) / counts_per_rev / span
-
-
-@compiled(types.void(IN_F8, F8_C, F8_C, IN_F8_C, IN_F8_C, IN_F8_C, IN_F8_C))
-def advance_bank(u, x0, x1, decay, turn, decay2, turn2):
-    """Every mode of the bank over the samples ``u``, two samples a step, in place.
-
-    Mode ``m`` is the pole ``p = decay + i turn`` as the real pair ``x0 - i x1`` of the
-    complex state ``xi' = p xi + u``, that is ``[x0, x1]' = [[decay, turn], [-turn, decay]]
-    [x0, x1] + [u, 0]``. Two samples at once, ``xi'' = p^2 xi + p u_a + u_b`` (``p^2 =
-    decay2 + i turn2``): one flat loop over the modes, which the compiler vectorises, per
-    two samples, so the bank's arrays pass through the cache half as often as stepping
-    sample by sample, for the same filter (it differs in rounding only).
-    """
-    for i in range(0, len(u) - 1, 2):
-        ua, ub = u[i], u[i + 1]
-        for m in range(len(x0)):
-            p, q = x0[m], x1[m]
-            x0[m] = decay2[m] * p + turn2[m] * q + decay[m] * ua + ub
-            x1[m] = decay2[m] * q - turn2[m] * p - turn[m] * ua
-    if len(u) % 2:
-        ua = u[len(u) - 1]
-        for m in range(len(x0)):
-            p, q = x0[m], x1[m]
-            x0[m] = decay[m] * p + turn[m] * q + ua
-            x1[m] = decay[m] * q - turn[m] * p
-
-
-@compiled(types.void(IN_F8, F8, F8_C, F8_C, IN_F8_C, IN_F8_C, IN_I8_C, IN_F8_C, IN_F8_C,
-                     types.float64))
-def band_output(u, y, x0, x1, decay, turn, modes, c0, c1, d):
-    """One band's output over the samples ``u``, into ``y``: ``d u`` plus ``c0 x0 + c1 x1`` of
-    each of its ``modes``, stepped sample by sample from the bank's state (left unchanged)."""
-    for i in range(len(u)):
-        y[i] = d * u[i]
-    for k in range(len(modes)):
-        p, q = x0[modes[k]], x1[modes[k]]
-        s, w = decay[modes[k]], turn[modes[k]]
-        for i in range(len(u)):
-            y[i] += c0[k] * p + c1[k] * q
-            p, q = s * p + w * q + u[i], s * q - w * p
-
-
-@compiled(types.void(IN_F8, IN_I8, F8, F8_C, F8_C, IN_F8_C, IN_F8_C, IN_F8_C, IN_F8_C,
-                     IN_I8_2D_C, IN_F8_2D_C, IN_F8_2D_C, IN_F8, IN_F8, I8_C, I8_C, types.float64,
-                     types.int64, types.float64, types.float64))
-def notch_stream(u, counts, y, x0, x1, decay, turn, decay2, turn2, band_modes, c0, c1, d, centres,
-                 marks, at, hysteresis, tick, fs, counts_per_rev):
-    """Filter ``u`` into ``y`` with the active band while the whole bank runs, in place.
-
-    The bank is kept as its distinct notch pole pairs (:func:`notch_modes`); band ``j``
-    reads its modes ``band_modes[j]`` with the weights ``c0[j], c1[j]`` and its
-    feed-through ``d[j]``. Up to the end of each control tick (``tick`` samples, counted
-    from ``reset``) the active band's output is made from its own modes
-    (:func:`band_output`) and the whole bank steps on (:func:`advance_bank`); at the end
-    the encoder speed picks the band for the next tick (:func:`select_band`).
-    """
-    band = at[BAND]
-    i = 0
-    while i < len(u):
-        end = min(len(u), i + tick - at[PHASE])          # up to the end of this tick
-        if band == OFF:
-            y[i:end] = u[i:end]
-        else:
-            band_output(u[i:end], y[i:end], x0, x1, decay, turn, band_modes[band], c0[band],
-                        c1[band], d[band])
-        advance_bank(u[i:end], x0, x1, decay, turn, decay2, turn2)
-        at[PHASE] += end - i
-        if at[PHASE] == tick:
-            at[PHASE] = 0
-            speed = tick_speed(marks, at, counts[end - 1], tick, fs, counts_per_rev)
-            band = select_band(speed, band, centres, hysteresis)
-        i = end
-    at[BAND] = band
+def mode_rows(values: np.ndarray) -> np.ndarray:
+    """The bank's per-mode ``values`` as the ``(ROWS, columns)`` array the compiled loop
+    advances (``methods/_notch_stream.py``): mode ``m`` at flat index ``m``, the last row
+    padded with zeros (idle modes no band reads)."""
+    columns = -(-len(values) // ROWS)
+    rows = np.zeros(ROWS * columns)
+    rows[:len(values)] = values
+    return rows.reshape(ROWS, columns)
 
 
 class SwitchedNotch(Method):
@@ -356,9 +250,10 @@ class SwitchedNotch(Method):
         centres = band_centres(self.min_speed, self.max_speed, spacing)
         poles, band_modes, weights, direct = notch_modes(centres, self.orders, self.q, spec.fs)
         return dict(key=self._design_key(spec), centres_=centres, poles_=poles,
-                    decay_=poles.real.copy(), turn_=poles.imag.copy(), decay2_=(poles ** 2).real.copy(),
-                    turn2_=(poles ** 2).imag.copy(), band_modes_=band_modes,
-                    c0_=weights.real.copy(), c1_=weights.imag.copy(), d_=direct)
+                    decay_=mode_rows(poles.real), turn_=mode_rows(poles.imag),
+                    decay2_=mode_rows((poles ** 2).real), turn2_=mode_rows((poles ** 2).imag),
+                    band_modes_=band_modes, c0_=weights.real.copy(), c1_=weights.imag.copy(),
+                    d_=direct)
 
     def step(self, block: SensorBlock) -> np.ndarray:
         """Notch the strain with the active band; the band is picked on the tick grid."""
@@ -377,6 +272,6 @@ class SwitchedNotch(Method):
         """Every mode at rest on the first sample (``xi = u0 / (1 - p)``), so no filter
         starts from zero."""
         rest = u0 / (1.0 - self.poles_)
-        self.x0_, self.x1_ = rest.real.copy(), -rest.imag
+        self.x0_, self.x1_ = mode_rows(rest.real), mode_rows(-rest.imag)
         self.marks_[0] = count0
         self.at_[N_MARKS] = 1

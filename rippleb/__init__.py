@@ -54,7 +54,7 @@ from rippleb._lazy import lazy_exports  # noqa: E402
 _EXPORTS = {
     "CONDITIONS": "rippleb.simulator.conditions",
     "DEFAULT_CONDITION": "rippleb.simulator.conditions",
-    "DaskExecutor": "rippleb.engine.dask_executor",
+    "DaskExecutor": "rippleb.engine.dask.executor",
     "JointSpec": "rippleb.data",
     "SensorBlock": "rippleb.data",
     "SensorLog": "rippleb.data",
@@ -78,7 +78,7 @@ _EXPORTS = {
 
 if TYPE_CHECKING:  # what static tools see: the same names, imported eagerly
     from rippleb.simulator.conditions import CONDITIONS, DEFAULT_CONDITION
-    from rippleb.engine.dask_executor import DaskExecutor
+    from rippleb.engine.dask.executor import DaskExecutor
     from rippleb.data import JointSpec, SensorBlock, SensorLog, make_log, read_log, write_log
     from rippleb.errors import InputError, PluginError, RipplebError
     from rippleb.method import Method

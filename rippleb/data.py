@@ -25,16 +25,12 @@ from typing import Iterator
 
 import numpy as np
 
+from rippleb.log_columns import LOG_COLUMNS, MAX_CHANNELS, SENSOR_COLUMNS, channel_columns, channel_names
 from rippleb.errors import InputError
 from rippleb.files import atomic_path
+from rippleb.reading import LOG_BYTES, check_file, duplicated_columns, read_table
 from rippleb.timebase import check_steps, uniform_rate
 
-SENSOR_COLUMNS = ("t", "strain", "encoder", "current")
-#: Optional sensor columns: ``index`` is 1 on samples where the encoder's once-per-revolution
-#: index pulse is seen, else 0 (simulated logs have it; recorded logs may).
-OPTIONAL_SENSOR_COLUMNS = ("index",)
-TRUTH_COLUMNS = ("torque_true", "torque_ref")
-LOG_COLUMNS = SENSOR_COLUMNS + OPTIONAL_SENSOR_COLUMNS + TRUTH_COLUMNS
 #: Largest encoder count a log may hold: 2^53, the largest integer below which a float64
 #: (how a log's columns are read and checked) holds every integer exactly.
 MAX_EXACT_COUNT = 2**53
@@ -45,8 +41,11 @@ SMALLEST_NORMAL = float(np.finfo(float).tiny)
 #: A torque above this many times the joint's rated torque would break the drive: Harmonic
 #: Drive catalogues rate the momentary peak of size-25 units at 4-7 times the rated torque.
 #: Simulated loads stay below it; a recorded log's estimate beyond it is not scored
-#: (:mod:`rippleb.scorable`).
+#: (:mod:`rippleb.scoring.scorable`).
 MAX_TORQUE_FACTOR = 10.0
+#: Most samples a recorded log may hold: 20 million, 1000 s at 20 kHz, twice the longest
+#: simulated scenario (:data:`rippleb.scenario.MAX_SAMPLES`); more is read no further.
+MAX_LOG_SAMPLES = 20_000_000
 
 
 @dataclass(frozen=True)
@@ -110,7 +109,9 @@ class SensorBlock:
     """The samples of one control tick: equal-length arrays, oldest first.
 
     ``t`` [s], ``strain`` [V], ``encoder`` [integer counts], ``current`` [A];
-    ``index`` [0/1 per sample, the encoder's index pulse] or None when the log has none.
+    ``index`` [0/1 per sample, the encoder's index pulse] or None when the log has none;
+    ``channels`` [V, samples x channels], each amplifier channel of a gauge layout with
+    several (``strain`` is their mean), or None.
     """
 
     t: np.ndarray
@@ -118,6 +119,7 @@ class SensorBlock:
     encoder: np.ndarray
     current: np.ndarray
     index: np.ndarray | None = None
+    channels: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t)
@@ -127,7 +129,9 @@ class SensorBlock:
 class SensorLog:
     """A recording of one joint, equal-length columns sampled at ``spec.fs``.
 
-    ``index`` (the encoder's index pulse, 0/1) is optional, as on a recorded log.
+    ``index`` (the encoder's index pulse, 0/1) is optional, as on a recorded log, and so
+    is ``channels`` (samples x channels [V]: each amplifier channel of a gauge layout with
+    several, whose mean is ``strain``; ``strain_1 .. strain_K`` in a file).
     ``torque_true`` is present only on simulated logs and never reaches a method;
     ``torque_ref`` reaches a method only in the calibration log.
     ``meta`` holds provenance (scenario, seed, run) and is free-form.
@@ -142,6 +146,7 @@ class SensorLog:
     torque_true: np.ndarray | None = None
     torque_ref: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
+    channels: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t)
@@ -159,8 +164,9 @@ class SensorLog:
     def block(self, start: int, stop: int) -> SensorBlock:
         """The samples ``start:stop`` as one block."""
         index = None if self.index is None else self.index[start:stop]
+        channels = None if self.channels is None else self.channels[start:stop]
         return SensorBlock(self.t[start:stop], self.strain[start:stop],
-                           self.encoder[start:stop], self.current[start:stop], index)
+                           self.encoder[start:stop], self.current[start:stop], index, channels)
 
     def for_method(self, *, keep_ref: bool) -> "SensorLog":
         """A copy a method may see: no ``torque_true``; ``torque_ref`` only if ``keep_ref``."""
@@ -168,9 +174,17 @@ class SensorLog:
                                    torque_ref=self.torque_ref if keep_ref else None)
 
     def columns(self) -> dict[str, np.ndarray]:
-        """The columns that are present, in file order."""
-        cols = {name: getattr(self, name) for name in LOG_COLUMNS}
+        """The columns that are present, in file order; ``channels`` (2-D) last."""
+        cols = {name: getattr(self, name) for name in LOG_COLUMNS + ("channels",)}
         return {name: value for name, value in cols.items() if value is not None}
+
+    def file_columns(self) -> dict[str, np.ndarray]:
+        """:meth:`columns` as a file holds them: each channel its own ``strain_k`` column."""
+        cols = self.columns()
+        channels = cols.pop("channels", None)
+        if channels is not None:
+            cols.update(zip(channel_names(channels.shape[1]), channels.T))
+        return cols
 
 
 def make_log(spec: JointSpec, columns: dict, *, source: str = "log", meta: dict | None = None) -> SensorLog:
@@ -181,13 +195,21 @@ def make_log(spec: JointSpec, columns: dict, *, source: str = "log", meta: dict 
     subnormal values, non-integer encoder counts or counts beyond :data:`MAX_EXACT_COUNT`, or time
     stamps that do not strictly increase.
     """
+    columns = dict(columns)
+    stacked = columns.pop("channels", None)
+    if stacked is not None:   # a log's own 2-D channels, checked like a file's columns
+        stacked = np.asarray(stacked)
+        if stacked.ndim != 2:
+            raise InputError(f"{source}: channels must be samples x channels, got {stacked.ndim} dimension(s)")
+        columns.update(zip(channel_names(stacked.shape[1]), stacked.T))
+    named = channel_columns(columns, source)
     missing = [name for name in SENSOR_COLUMNS if name not in columns]
     if missing:
         raise InputError(f"{source}: missing column(s) {', '.join(missing)} "
                          f"(a log needs {', '.join(SENSOR_COLUMNS)}; a DAQ's own names and units are "
                          f"mapped in a joint file's [joint.columns], docs/your-joint.md)")
     arrays = {}
-    for name in LOG_COLUMNS:
+    for name in LOG_COLUMNS + named:
         if name not in columns or columns[name] is None:
             continue
         raw = np.asarray(columns[name])
@@ -230,6 +252,8 @@ def make_log(spec: JointSpec, columns: dict, *, source: str = "log", meta: dict 
         if not np.isin(arrays["index"], (0.0, 1.0)).all():
             raise InputError(f"{source}: column index must hold 0 or 1 (the encoder's index pulse)")
         arrays["index"] = arrays["index"].astype(np.int8)
+    if named:
+        arrays["channels"] = np.column_stack([arrays.pop(name) for name in named])
     return SensorLog(spec=spec, meta=dict(meta or {}), **arrays)
 
 
@@ -238,23 +262,6 @@ def _holds_booleans(values: np.ndarray) -> bool:
     if values.dtype.kind == "b":
         return True
     return values.dtype.kind == "O" and any(isinstance(v, (bool, np.bool_)) for v in values)
-
-
-def _duplicated_columns(path: Path, suffix: str) -> list[str]:
-    """The log columns named more than once in the file's header (pandas would rename the
-    second ``strain`` to ``strain.1`` and read the first alone; Arrow refuses to choose)."""
-    try:
-        if suffix == ".csv":
-            import pandas as pd
-
-            names = [str(n) for n in pd.read_csv(path, header=None, nrows=1, dtype=str).iloc[0]]
-        else:
-            import pyarrow.parquet as pq
-
-            names = pq.read_schema(path).names
-    except Exception:  # noqa: BLE001 - unreadable: the read itself says why, naming the file
-        return []
-    return sorted({n for n in names if n in LOG_COLUMNS and names.count(n) > 1})
 
 
 def read_log(path: str | Path, spec: JointSpec | None = None, *, joint=None,
@@ -280,30 +287,27 @@ def read_log(path: str | Path, spec: JointSpec | None = None, *, joint=None,
         clock's rate (:func:`rippleb.timebase.resample`); without it such a log is refused.
 
     ``meta["joint"]`` lists, per value the log is read with, whether it was given or assumed,
-    and what the log's own checks found (:mod:`rippleb.joint_checks`: a value the log
-    contradicts is an :class:`InputError`); ``meta["reference_kind"]`` what its
-    ``torque_ref`` is (``[joint.reference] kind``).
+    and what the log's own checks found (:mod:`rippleb.joint_checks`: a contradicted value is
+    an :class:`InputError`); ``meta["reference_kind"]``, what its ``torque_ref`` is.
     """
-    import pandas as pd
-
     from rippleb import joint_checks, joint_file
 
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".csv", ".parquet"):
         raise InputError(f"{path}: unsupported log format {suffix or '(none)'!r}; use .csv or .parquet")
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
+    try:   # a regular file of at most LOG_BYTES: not a FIFO (a hang), a device or a giant
+        check_file(path, LOG_BYTES, "log")
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file") from None
     given = joint_file.load_joint(joint) if isinstance(joint, (str, Path)) else joint
     description = joint_file.description_for(path, given)
-    twice = _duplicated_columns(path, suffix)
+    twice = duplicated_columns(path, LOG_COLUMNS + channel_names(MAX_CHANNELS))
     if twice:
         raise InputError(f"{path}: column {', '.join(twice)} appears more than once; keep one")
-    try:
-        frame = pd.read_csv(path) if suffix == ".csv" else pd.read_parquet(path)
-    except Exception as exc:  # pandas raises many types for unreadable files
-        raise InputError(f"{path}: cannot read as {suffix[1:]}: {str(exc).splitlines()[0]}") from None
-    columns, units = joint_file.map_columns(frame, description, str(path), LOG_COLUMNS)
+    frame = read_table(path, MAX_LOG_SAMPLES, "log")
+    wanted = joint_file.with_channels(frame, description, LOG_COLUMNS)
+    columns, units = joint_file.map_columns(frame, description, str(path), wanted)
     if not joint_file.index_wanted(description, columns, str(path)):
         columns.pop("index", None)
         units.pop("index", None)
@@ -372,7 +376,7 @@ def write_log(log: SensorLog, path: str | Path) -> Path:
     Arrow's writer is about ten times faster than pandas' formatter (0.06 against 0.6 s
     for paper-quintic's 80 000 rows).
     """
-    return write_columns(log.columns(), path)
+    return write_columns(log.file_columns(), path)
 
 
 def write_columns(columns: dict[str, np.ndarray], path: str | Path) -> Path:

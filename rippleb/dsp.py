@@ -10,6 +10,8 @@ it again per row.
 
 from __future__ import annotations
 
+import os
+
 import numba
 import numpy as np
 from numba import types
@@ -27,8 +29,44 @@ F8_2D_C = types.float64[:, ::1]
 
 
 def compiled(signature):
-    """``numba.njit`` for ``signature``, compiled at import and cached on disk."""
-    return numba.njit(signature, cache=True, nogil=True)
+    """``numba.njit`` for ``signature``, compiled at import and cached on disk.
+
+    numba caches beside the function's source, else under ``$HOME`` (or ``NUMBA_CACHE_DIR``);
+    where neither is writable (an unprivileged user without a home, issue 41: a "cannot cache
+    function" traceback before any row ran) it caches in a directory of this user's own
+    under the system's temporary directory (:func:`private_cache_dir`), and where even that
+    cannot be had, compiles without caching (each process compiles again)."""
+    def decorate(fn):
+        try:
+            return numba.njit(signature, cache=True, nogil=True)(fn)
+        except RuntimeError:   # "no locator available": nowhere numba may write its cache
+            from numba.core import config
+
+            config.CACHE_DIR = private_cache_dir() or config.CACHE_DIR
+            try:
+                return numba.njit(signature, cache=True, nogil=True)(fn)
+            except RuntimeError:
+                return numba.njit(signature, nogil=True)(fn)
+    return decorate
+
+
+def private_cache_dir() -> str | None:
+    """``<temporary directory>/rippleb-numba-<uid>``, made mode 0700, if it is this user's own
+    directory (not a link, not another user's, not open to others); else None."""
+    import stat
+    import tempfile
+
+    path = os.path.join(tempfile.gettempdir(), f"rippleb-numba-{os.getuid()}")
+    try:
+        os.mkdir(path, 0o700)
+    except FileExistsError:
+        pass
+    except OSError:
+        return None
+    info = os.lstat(path)
+    if not stat.S_ISDIR(info.st_mode) or info.st_uid != os.getuid() or info.st_mode & 0o077:
+        return None
+    return path
 
 
 def fit_gain_offset(strain: np.ndarray, torque: np.ndarray) -> tuple[float, float]:

@@ -31,6 +31,22 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None
 
 
+def refuse_links(directory: Path, names, also_in: str | None = None) -> None:
+    """Refuse a directory where an entry rippleb writes (``names``, and any entry of the
+    subdirectory ``also_in``) is a symbolic link: rippleb makes none, and writing through
+    one would truncate or fill the file it names, anywhere the user may write (issue 34; a
+    report's ``figures/`` a link once put its figures outside, issue 41). One line naming
+    the first."""
+    directory = Path(directory)
+    found = [directory / name for name in names if (directory / name).is_symlink()]
+    inner = directory / also_in if also_in else None
+    if not found and inner is not None and inner.is_dir():
+        found = [entry for entry in sorted(inner.iterdir()) if entry.is_symlink()][:1]
+    if found:
+        raise InputError(f"{found[0]}: a symbolic link, which rippleb never makes in a run or report "
+                         f"directory; rippleb does not write through it: remove it, or choose another --out")
+
+
 def open_appending(path: str | Path, encoding: str = "utf-8"):
     """``path`` opened to append text (created if absent), never through a symbolic link:
     a link put in place of a run directory's file must not lead rippleb's writes to the

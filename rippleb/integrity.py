@@ -1,6 +1,6 @@
 """Which rows of a run directory rippleb itself wrote: a keyed hash (HMAC-SHA256) of each.
 
-A method's process is confined (:mod:`rippleb.engine.isolation`): it cannot write the run
+A method's process is confined (:mod:`rippleb.engine.process.isolation`): it cannot write the run
 directory. What it cannot be kept from where the kernel refuses namespaces, and what
 anyone else may do to a results file between runs (an edit by hand, a script, a copied
 row), is caught here: every row rippleb records gets a MAC under a key that only the
@@ -71,13 +71,15 @@ def key_path() -> Path:
 def _key_at(path: Path, create: bool) -> bytes | None:
     # Read each time, never cached: a later run's fork server, forked from this process,
     # must not inherit the key in a module's memory (rippleb.run called twice in a session).
+    from rippleb.reading import SECRET_BYTES, read_bytes
+
     try:
-        secret = path.read_bytes()
+        secret = read_bytes(path, SECRET_BYTES, "key file")
     except FileNotFoundError:
         if not create:
             return None
         secret = _create_key(path)
-    except OSError:
+    except (OSError, InputError):   # not a regular file, too large: no key
         return None
     return secret if len(secret) == 32 else None
 
@@ -231,10 +233,14 @@ def _config_intact(secret: bytes, config: dict) -> bool:
 
 
 def _read_config(run_dir: Path) -> dict:
-    """``run_dir/run.json``, or {} where it cannot be read as an object."""
+    """``run_dir/run.json``, or {} where it cannot be read as an object (a link, a FIFO, too
+    large or too deep: :mod:`rippleb.reading`; the report's own reading of it says why)."""
+    from rippleb.reading import RUN_FILE_BYTES, parse_json, read_text
+
+    path = run_dir / "run.json"
     try:
-        config = json.loads((run_dir / "run.json").read_text())
-    except (OSError, ValueError):
+        config = parse_json(read_text(path, RUN_FILE_BYTES, "run file", in_run_dir=True), path)
+    except (OSError, InputError):
         return {}
     return config if isinstance(config, dict) else {}
 
@@ -259,9 +265,12 @@ def verified_rows(run_dir: Path, rows: list[dict], results_path: Path) -> list[d
         warnings.warn(f"{Path(run_dir) / 'run.json'}: changed since rippleb wrote it (its keyed hash does not "
                       f"match); what it says of the run (seeds, selection) is not rippleb's", IntegrityWarning,
                       stacklevel=3)
+    from rippleb.reading import LEDGER_BYTES, read_text
+
     try:
-        known = set(Path(run_dir, LEDGER).read_text(encoding="ascii").split())
-    except (OSError, UnicodeDecodeError):
+        known = set(read_text(Path(run_dir, LEDGER), LEDGER_BYTES, "ledger of row MACs", in_run_dir=True,
+                              encoding="ascii").split())
+    except FileNotFoundError:
         known = set()
     nonce = str(seal.get("nonce"))
     kept, foreign = [], []

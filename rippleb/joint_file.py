@@ -27,13 +27,14 @@ its one file. :func:`describe` says, per value, whether it was given or assumed.
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from rippleb.reading import check_joint_value
 from rippleb.errors import InputError
+from rippleb.log_columns import is_channel
 from rippleb.timebase import TIME_UNITS, looks_like_epoch, to_seconds
 
 #: Joint values a ``[joint]`` table may give (the fields of ``JointSpec`` but ``fs``, which
@@ -110,15 +111,13 @@ def load_joint(path: str | Path, *, sidecar: bool = False) -> JointDescription:
     A ``--joint`` file holds the ``[joint]`` table alone; a sidecar may hold other tables
     of its own (notes, the bench), which rippleb leaves alone.
     """
+    from rippleb.reading import TOML_BYTES, parse_toml, read_text
+
     path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    try:   # a regular file of at most TOML_BYTES (a FIFO once hung the run), nested a few deep
+        raw = parse_toml(read_text(path, TOML_BYTES, "joint file"), path)
     except FileNotFoundError:
         raise InputError(f"{path}: no such joint file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{path}: not valid TOML: {exc}") from None
     extra = sorted(set(raw) - {"joint"})
     if extra and not sidecar:
         raise InputError(f"{path}: {extra[0]}: unknown key; a joint file holds a [joint] table")
@@ -170,15 +169,21 @@ def _joint_value(path: Path, key: str, value):
         return value
     if isinstance(value, bool) or not isinstance(value, (int, float)) or (kind is int and not isinstance(value, int)):
         raise InputError(f"{where}: must be a {'whole ' if kind is int else ''}number, got {value!r}")
-    if not np.isfinite(value) or value <= 0:
+    if not np.isfinite(value):
         raise InputError(f"{where}: must be positive, got {value!r}")
-    return kind(value)
+    return kind(check_joint_value(key, value, where))   # the ranges a scenario's [joint] has too
+
+
+def unit_kind(name: str) -> str:
+    """The column whose units ``name`` takes: ``strain`` for a channel ``strain_k``."""
+    return "strain" if is_channel(name) else name
 
 
 def _column(path: Path, name: str, entry) -> Column:
     where = f"{path}: joint.columns.{name}"
-    if name not in COLUMN_UNITS:
-        raise InputError(f"{where}: unknown column; rippleb's columns: {', '.join(COLUMN_UNITS)}")
+    if unit_kind(name) not in COLUMN_UNITS:
+        raise InputError(f"{where}: unknown column; rippleb's columns: {', '.join(COLUMN_UNITS)} "
+                         f"and the strain channels strain_1, strain_2, ...")
     if entry is False and name in OPTIONAL_COLUMNS:
         return Column("", absent=True)
     if isinstance(entry, str):
@@ -196,11 +201,12 @@ def _column(path: Path, name: str, entry) -> Column:
         raise InputError(f"{where}: give unit or scale, not both")
     if "scale" in entry:
         return Column(column, "", _scale(where, name, entry["scale"]))
-    unit = entry.get("unit", RIPPLEB_UNITS[name])
-    if unit not in COLUMN_UNITS[name]:
+    kind = unit_kind(name)
+    unit = entry.get("unit", RIPPLEB_UNITS[kind])
+    if unit not in COLUMN_UNITS[kind]:
         raise InputError(f"{where}.unit: {unit!r} is not a unit of {name}; use one of "
-                         f"{', '.join(COLUMN_UNITS[name])}")
-    return Column(column, unit, COLUMN_UNITS[name][unit])
+                         f"{', '.join(COLUMN_UNITS[kind])}")
+    return Column(column, unit, COLUMN_UNITS[kind][unit])
 
 
 def _scale(where: str, name: str, scale) -> float:
@@ -223,6 +229,15 @@ def description_for(log_path: str | Path, given: JointDescription | None) -> Joi
     return base.merged(load_joint(sidecar, sidecar=True)) if sidecar.is_file() else base
 
 
+def with_channels(frame, joint: JointDescription, wanted: tuple[str, ...]) -> tuple[str, ...]:
+    """``wanted`` and the strain channels (``strain_k``) the joint maps or the file holds
+    under rippleb's name (a file column another entry maps is not a channel of its own)."""
+    targets = {column.name for column in joint.columns.values()}
+    found = {name for name in joint.columns if is_channel(name)}
+    found |= {str(c) for c in frame.columns if is_channel(c) and str(c) not in targets}
+    return tuple(wanted) + tuple(sorted(found - set(wanted), key=lambda n: int(n.rpartition("_")[2])))
+
+
 def map_columns(frame, joint: JointDescription, source: str, wanted: tuple[str, ...]) -> tuple[dict, dict]:
     """rippleb's columns from a pandas ``frame``, renamed and in rippleb's units.
 
@@ -230,6 +245,7 @@ def map_columns(frame, joint: JointDescription, source: str, wanted: tuple[str, 
     whether they were given. A mapped column the file lacks is an :class:`InputError`
     naming the joint file and the entry; an unmapped one is looked up under rippleb's name.
     """
+    _refuse_shared_columns(joint)
     columns, units = {}, {}
     for name in wanted:
         mapped = joint.columns.get(name)
@@ -240,7 +256,7 @@ def map_columns(frame, joint: JointDescription, source: str, wanted: tuple[str, 
                     f"[joint.columns] {name} = false" if name in OPTIONAL_COLUMNS else "")
             raise InputError(f"{joint.sources[f'columns.{name}']}: joint.columns.{name}: {source} has no "
                              f"column {mapped.name!r} (its columns: {', '.join(map(str, frame.columns))}){hint}")
-        column = mapped or Column(name, RIPPLEB_UNITS[name])
+        column = mapped or Column(name, RIPPLEB_UNITS[unit_kind(name)])
         if column.name not in frame.columns:
             continue
         columns[name] = frame[column.name].to_numpy()
@@ -251,6 +267,20 @@ def map_columns(frame, joint: JointDescription, source: str, wanted: tuple[str, 
     if "t" in columns:
         columns["t"] = _seconds(columns["t"], joint.columns.get("t"), units["t"])
     return columns, units
+
+
+def _refuse_shared_columns(joint: JointDescription) -> None:
+    """One line when two of rippleb's columns are mapped onto one column of the file (the
+    strain read as the current too gave ``ok`` rows of a joint that does not exist)."""
+    seen: dict[str, str] = {}
+    for name, column in joint.columns.items():
+        if column.absent:   # ``NAME = false`` maps no column of the log
+            continue
+        if column.name in seen:
+            raise InputError(f"{joint.sources[f'columns.{name}']}: joint.columns: {seen[column.name]} and {name} "
+                             f"both map the log's column {column.name!r}; each of rippleb's columns is one of "
+                             f"the log's")
+        seen[column.name] = name
 
 
 def _scaled(values, scale: float):

@@ -11,11 +11,12 @@ has its own errors. Each of those is one *knob* here: a documented parameter wit
 condition, with its source or the reason for the estimate (``docs/physics.md``, "Beyond
 the methods' models").
 
-A scenario sets knobs in five tables (``[mismatch]``, ``[thermal]``, ``[daq]``,
-``[encoder]``, ``[controller]``); a knob it sets acts under every condition, one it leaves
+A scenario sets knobs in six tables (``[mismatch]``, ``[thermal]``, ``[daq]``,
+``[encoder]``, ``[controller]``, ``[gear]``); a knob it sets acts under every condition, one it leaves
 unset is off, except under ``realistic``, where it takes its documented magnitude. The
 physics lives in :mod:`rippleb.simulator.gauge`, :mod:`rippleb.simulator.daq`,
-:mod:`rippleb.simulator.encoder` and :mod:`rippleb.simulator.controller`.
+:mod:`rippleb.simulator.encoder`, :mod:`rippleb.simulator.controller` and
+:mod:`rippleb.simulator.transmission`.
 
 Examples
 --------
@@ -107,6 +108,17 @@ KNOBS = (
     # same-session rows; the speed non-uniformity it stands for is already in today's loop.
     Knob("controller", "bandwidth_factor", "bandwidth_factor", float, 0.25, 4.0, 1.0, 1.0,
          "position-loop bandwidth in multiples of the documented design (1: today; a sweep knob)"),
+    # The real torque locked to the wave-generator angle beyond the kinematic error (the
+    # [gear] table also holds transmission_error and order2_share, which act in every
+    # condition): rippleb/simulator/transmission.py, docs/physics.md "Transmission error".
+    Knob("gear", "compliance_variation", "compliance_variation", float, 0.0, 0.5, 0.0, 0.02,
+         "relative variation of the flexspline's compliance at twice the wave-generator angle (0: none)"),
+    Knob("gear", "order4_error", "order4_error", float, 0.0, 2.0, 0.0, 0.25,
+         "transmission error at order 4 of the wave-generator angle, x the device's order-2 amplitude (0: none)"),
+    Knob("gear", "load_error", "load_error", float, 0.0, 5.0, 0.0, 0.5,
+         "growth of the order-2 transmission error at rated torque, relative (0: none)"),
+    Knob("gear", "loss_factor", "loss_factor", float, 0.0, 1.0, 0.0, 0.1,
+         "the drive's hysteresis loss as structural damping: loss factor at the joint's own mode (0: none)"),
 )
 KNOB_BY_NAME = {k.name: k for k in KNOBS}
 #: ``{table: {key: accepted types}}`` for the scenario parser.
@@ -138,6 +150,10 @@ class Unmodelled:
     eccentricity_counts: float | None = None
     missed: float | None = None
     bandwidth_factor: float | None = None
+    compliance_variation: float | None = None
+    order4_error: float | None = None
+    load_error: float | None = None
+    loss_factor: float | None = None
 
     def resolve(self, realistic: bool) -> "Unmodelled":
         """Every knob set: the scenario's value, else the ``realistic`` magnitude under
@@ -177,7 +193,9 @@ def parse_tables(top: dict, fail, spec) -> Unmodelled:
     values = {}
     for table in TABLES:
         for key, value in top.get(table, {}).items():
-            knob = KNOB_BY_NAME[f"{table}.{key}"]
+            knob = KNOB_BY_NAME.get(f"{table}.{key}")
+            if knob is None:   # a key of the table that is not a knob ([gear] transmission_error)
+                continue
             if not knob.low <= value <= knob.high:
                 fail(knob.name, f"must be within [{knob.low:g}, {knob.high:g}] ({knob.doc}), got {value:g}")
             values[knob.field] = knob.kind(value)

@@ -70,6 +70,14 @@ class Entry:
         """True once loading has failed."""
         return self.error is not None
 
+    @property
+    def module(self) -> str:
+        """The module that holds the method, named without importing it (what its process
+        may read, :mod:`rippleb.engine.process.landlock`)."""
+        if self.cls is not None:
+            return self.cls.__module__
+        return getattr(self._entry_point, "module", None) or self.source.rpartition(" ")[2].partition(":")[0]
+
     def load(self) -> type:
         """The method class, importing a plugin on first use.
 

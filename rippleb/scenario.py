@@ -21,18 +21,19 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import importlib.resources
-import tomllib
 from pathlib import Path
 
 import numpy as np
 
 from rippleb.data import MAX_TORQUE_FACTOR, JointSpec
+from rippleb.reading import check_joint_value
 from rippleb.errors import InputError
+from rippleb.layouts import GAUGE_KEYS, parse_gauges
 from rippleb.mismatch import TABLES as _UNMODELLED_TABLES, parse_tables
 from rippleb.profiles import DEFAULT_RISE, Load, Segment, evaluate_segments  # noqa: F401 (re-exported)
 from rippleb.scenario_types import (DEFAULT_JOINT, DEFAULT_ROBOT, DEFAULT_TEMPERATURE_C,  # noqa: F401 (re-exported)
                                     HYSTERESIS_NM, REFERENCE_TEMPERATURE_C, RIPPLE_TEMP_COEFF, Faults,
-                                    TRANSMISSION_ERROR_PP, RippleSettings, Scenario)
+                                    ORDER2_SHARE, TRANSMISSION_ERROR_PP, RippleSettings, Scenario)
 
 CALIBRATION = "calibration"
 SEGMENT_KINDS = ("hold", "move", "ramp", "cruise")
@@ -42,10 +43,11 @@ _NUMBER = (float, int)
 _TOP_KEYS = {"description": (str,), "scored": (bool,), "duration": _NUMBER,
              "temperature_c": _NUMBER, "evaluation": (dict,), "joint": (dict,),
              "robot": (dict,), "trajectory": (dict,), "load": (list,), "faults": (dict,),
-             "ripple": (dict,), "gear": (dict,), **{table: (dict,) for table in _UNMODELLED_TABLES}}
+             "ripple": (dict,), "gear": (dict,), "gauges": (dict,), **{table: (dict,) for table in _UNMODELLED_TABLES}}
 _RIPPLE_KEYS = {"output_scale": _NUMBER, "hysteresis_nm": _NUMBER, "temperature_coeff": _NUMBER,
                 "drift": _NUMBER}
-_GEAR_KEYS = {"transmission_error": _NUMBER}
+#: The [gear] keys that act in every condition; the table's knobs are :mod:`rippleb.mismatch`'s.
+_GEAR_KEYS = {"transmission_error": _NUMBER, "order2_share": _NUMBER}
 #: Largest transmission-error class accepted [rad peak to peak]: 3.4 arcmin, above every
 #: class of the CSF catalogue (1 arcmin standard).
 MAX_TRANSMISSION_ERROR = 1e-3
@@ -72,8 +74,6 @@ _FAULT_KEYS = {"encoder_missed": _NUMBER, "encoder_spurious_rate": _NUMBER,
 #: Longest log a scenario may ask for, in samples (500 s at 20 kHz; the simulator holds
 #: a few dozen float arrays of this length). Longer would exhaust memory, not simulate.
 MAX_SAMPLES = 10_000_000
-#: Plausible ranges of joint values: beyond them the numbers overflow, not simulate.
-_JOINT_MAX = {"fs": 1.0e6, "gear_ratio": 1000.0, "counts_per_rev": 2**24}
 #: Lubricant temperatures the friction model is meant for [deg C].
 TEMPERATURE_RANGE = (-40.0, 150.0)
 #: An external load above this many times the rated torque would break the drive
@@ -104,12 +104,10 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         One line ``<file>: <key>: <what is wrong>`` for a file that is not TOML, an
         unknown key, a wrong type or an impossible value; or for an unknown name.
     """
+    from rippleb.reading import parse_toml
+
     text, path, name = read_source(name_or_path)
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{path}: not valid TOML: {exc}") from None
-    return Parser(path, name).scenario(raw)
+    return Parser(path, name).scenario(parse_toml(text, path))
 
 
 def scenario_from_dict(raw: dict, name: str = "custom") -> Scenario:
@@ -121,14 +119,14 @@ def scenario_from_dict(raw: dict, name: str = "custom") -> Scenario:
 
 
 def read_source(name_or_path) -> tuple[str, Path, str]:
+    from rippleb.reading import TOML_BYTES, read_text
+
     candidate = Path(name_or_path)
-    if candidate.suffix == ".toml" or candidate.is_file():
-        if not candidate.is_file():
-            raise InputError(f"{candidate}: no such scenario file")
-        try:
-            return candidate.read_text(encoding="utf-8"), candidate, candidate.stem
-        except (OSError, UnicodeDecodeError) as exc:
-            raise InputError(f"{candidate}: cannot read: {exc}") from None
+    if candidate.suffix == ".toml" or candidate.exists():
+        try:   # a regular file of at most TOML_BYTES: not a FIFO, a device or a giant
+            return read_text(candidate, TOML_BYTES, "scenario file"), candidate, candidate.stem
+        except FileNotFoundError:
+            raise InputError(f"{candidate}: no such scenario file") from None
     name = str(name_or_path)
     if not name or any(c in name for c in "/\\") or name.startswith("."):
         # a name is not a path: it must not reach files outside the built-ins
@@ -196,13 +194,17 @@ class Parser:
             self.fail("ripple.temperature_coeff", f"{ripple.temperature_coeff:g} per K would turn the "
                       f"ripple negative at {temperature:g} degC")
         for table, keys in _UNMODELLED_TABLES.items():
-            self.table(top.get(table, {}), keys, table)
+            self.table(top.get(table, {}), {**keys, **(_GEAR_KEYS if table == "gear" else {})}, table)
         unmodelled = parse_tables(top, self.fail, spec)
-        gear = self.table(top.get("gear", {}), _GEAR_KEYS, "gear")
+        gear = top.get("gear", {})
         transmission_error = float(gear.get("transmission_error", TRANSMISSION_ERROR_PP))
         if not 0.0 <= transmission_error <= MAX_TRANSMISSION_ERROR:
             self.fail("gear.transmission_error", f"must be in [0, {MAX_TRANSMISSION_ERROR:g}] rad peak to "
                       f"peak, got {transmission_error:g}")
+        order2_share = float(gear.get("order2_share", ORDER2_SHARE))
+        if not 0.0 <= order2_share <= 1.0:
+            self.fail("gear.order2_share", f"must be in [0, 1] (of the class), got {order2_share:g}")
+        gauges = parse_gauges(self.table(top.get("gauges", {}), GAUGE_KEYS, "gauges"), self.fail)
         return Scenario(name=self.name, path=self.path,
                         description=top.get("description", "").strip(),
                         spec=spec, duration=duration, scored=top.get("scored", True),
@@ -210,15 +212,13 @@ class Parser:
                         temperature_c=temperature,
                         robot=robot, joint=joint, posture=posture,
                         segments=segments, loads=loads, faults=faults, ripple=ripple,
-                        unmodelled=unmodelled, transmission_error=transmission_error)
+                        unmodelled=unmodelled, transmission_error=transmission_error,
+                        order2_share=order2_share, gauges=gauges)
 
     def spec(self, raw) -> JointSpec:
         values = self.table(raw, _JOINT_KEYS, "joint")
         for key, value in values.items():
-            if value <= 0:
-                self.fail(f"joint.{key}", f"must be positive, got {value}")
-            if key in _JOINT_MAX and value > _JOINT_MAX[key]:
-                self.fail(f"joint.{key}", f"must be at most {_JOINT_MAX[key]:g}, got {value:g}")
+            check_joint_value(key, value, f"{self.path}: joint.{key}")
         spec = JointSpec(**{k: (v if k == "counts_per_rev" else float(v)) for k, v in values.items()})
         if spec.control_rate > spec.fs:
             self.fail("joint.control_rate", f"{spec.control_rate} exceeds fs {spec.fs}")

@@ -13,6 +13,7 @@ import numpy as np
 
 from rippleb.data import JointSpec
 from rippleb.errors import InputError
+from rippleb.layouts import GaugeSettings
 from rippleb.mismatch import Unmodelled
 from rippleb.profiles import Load, Segment, evaluate_segments
 
@@ -34,6 +35,11 @@ RIPPLE_TEMP_COEFF = 0.0
 #: the standard class (1 arcmin; the special class is 1.5e-4 rad). Scenario key
 #: ``[gear] transmission_error``; the physics is :mod:`rippleb.simulator.transmission`.
 TRANSMISSION_ERROR_PP = 2.9e-4
+#: Share of that class the twice-per-wave-generator-turn component takes (``[gear]
+#: order2_share``). **Estimate** held to the paper's Fig. 2 (order 4 the largest line of the
+#: strain at every speed): at the former 0.5 the gear's order-2 torque outgrew the gauges'
+#: order-4 ripple on most devices above 15 rev/s; docs/physics.md, "Transmission error".
+ORDER2_SHARE = 0.25
 
 
 @dataclass(frozen=True)
@@ -140,6 +146,11 @@ class Scenario:
     transmission_error
         The drive's transmission-error class [rad peak to peak] (``[gear]
         transmission_error``; :mod:`rippleb.simulator.transmission`), 0: an ideal gear.
+    order2_share
+        The share of that class the twice-per-turn component takes (``[gear] order2_share``).
+    gauges
+        The strain-gauge layout on the flexspline and the size of its installation errors
+        (``[gauges]``; :class:`~rippleb.layouts.GaugeSettings`); the paper's by default.
     """
 
     name: str
@@ -159,6 +170,8 @@ class Scenario:
     ripple: RippleSettings = RippleSettings()
     unmodelled: Unmodelled = Unmodelled()
     transmission_error: float = TRANSMISSION_ERROR_PP
+    order2_share: float = ORDER2_SHARE
+    gauges: GaugeSettings = GaugeSettings()
 
     def trajectory(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Commanded joint position, velocity, acceleration at times ``t``."""

@@ -33,6 +33,7 @@ import ast
 import inspect
 import itertools
 import json
+import math
 import re
 import tomllib
 from dataclasses import dataclass, field
@@ -42,6 +43,15 @@ from rippleb.registry import unknown_name
 
 #: The types a parameter value may have on the command line.
 VALUE_TYPES = (bool, int, float, str)
+#: Most variants one ``--methods`` may name, counted before any is made: the tuning protocol
+#: tries 16 points a method, a grid of three parameters at ten values each is 1000; a grid
+#: of 1e9 points had been expanded in memory (3.6 GB) before anything was checked.
+MAX_VARIANTS = 1000
+#: Longest ``--methods`` text, and longest text of one value: a label is a row's name.
+MAX_METHODS_CHARS = 64 * 1024
+MAX_VALUE_CHARS = 1000
+#: An integer value fits a signed 64-bit integer (what numpy and every C library take).
+MAX_INT = 2**63 - 1
 _BARE_WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_.-]*")
 _PARAM = re.compile(r"\s*([A-Za-z_][A-Za-z0-9_]*)\s*=(.*)", re.S)
 
@@ -91,17 +101,36 @@ def parse_value(text: str):
     """A literal: TOML's first (``true``, ``1e-3``, ``"x"``), then Python's (``True``,
     ``'x'``), else the text itself, a bare word (:class:`InputError` otherwise)."""
     text = text.strip()
+    if len(text) > MAX_VALUE_CHARS:
+        raise InputError(f"a value of {len(text)} characters, more than the {MAX_VALUE_CHARS} one may have")
     try:
-        return tomllib.loads(f"v = {text}")["v"]
+        return _bounded(tomllib.loads(f"v = {text}")["v"], text)
     except tomllib.TOMLDecodeError:
         pass
+    except (ValueError, RecursionError) as exc:   # an integer of more than 4300 digits, say
+        if isinstance(exc, InputError):
+            raise
     try:
-        return ast.literal_eval(text)
-    except (ValueError, SyntaxError, MemoryError, RecursionError):
+        value = ast.literal_eval(text)
+    except (ValueError, SyntaxError, MemoryError, RecursionError, TypeError):
         pass
+    else:
+        return _bounded(value, text)
     if _BARE_WORD.fullmatch(text):
         return text
-    raise InputError(f"{text!r} is not a value (a number, true/false, or a quoted string)")
+    raise InputError(f"{text[:60]!r} is not a value (a number, true/false, or a quoted string)")
+
+
+def _bounded(value, text: str):
+    """``value`` if every number in it is finite and every integer fits 64 bits; else one line."""
+    for v in value if isinstance(value, list) else [value]:
+        if isinstance(v, bool):
+            continue
+        if isinstance(v, int) and abs(v) > MAX_INT:
+            raise InputError(f"{text[:40]!r}: an integer beyond 64 bits (+-{MAX_INT})")
+        if isinstance(v, float) and not math.isfinite(v):
+            raise InputError(f"{text[:40]!r}: {v} is not a finite number")
+    return value
 
 
 def split_top_level(text: str) -> list[str]:
@@ -127,8 +156,15 @@ def split_top_level(text: str) -> list[str]:
 def parse_methods(methods) -> list[Variant]:
     """Every variant of a ``--methods`` value (``"a,b[p=1,2]"`` or a list of items), in the
     order written, without repeats."""
+    if isinstance(methods, str) and len(methods) > MAX_METHODS_CHARS:
+        raise InputError(f"--methods: {len(methods)} characters, more than the {MAX_METHODS_CHARS} it may have")
     items = split_top_level(methods) if isinstance(methods, str) else list(methods)
-    variants = [v for item in items if str(item).strip() for v in parse_item(str(item).strip())]
+    grids = [(str(item).strip(), _grid_of(str(item).strip())) for item in items if str(item).strip()]
+    count = sum(_size(grid) for _, grid in grids)   # before any variant is made
+    if count > MAX_VARIANTS:
+        raise InputError(f"--methods names {count:.4g} variants, more than the {MAX_VARIANTS} a run may have "
+                         f"(docs/robustness.md, section 11); run a grid that large in parts")
+    variants = [v for item, grid in grids for v in _variants(item, grid)]
     return list({v.label: v for v in variants}.values())
 
 
@@ -149,14 +185,33 @@ def split_label(text: str) -> tuple[str, dict]:
 
 def parse_item(item: str) -> list[Variant]:
     """The variants of one ``--methods`` item: ``NAME`` or ``NAME[...]``."""
+    grid = _grid_of(item)
+    if _size(grid) > MAX_VARIANTS:
+        raise InputError(f"method {item[:60]!r} names {_size(grid):.4g} variants, more than the {MAX_VARIANTS} "
+                         f"a run may have")
+    return _variants(item, grid)
+
+
+def _grid_of(item: str) -> dict | None:
+    """``{parameter: [values]}`` of one item (None for a bare name), nothing expanded yet."""
     name, bracket, rest = item.partition("[")
     name = name.strip()
     if not bracket:
-        return [Variant(name)]
+        return None
     if not rest.endswith("]"):
-        raise InputError(f"method {item!r}: the parameters in brackets must end the item "
+        raise InputError(f"method {item[:60]!r}: the parameters in brackets must end the item "
                          f"(e.g. {name}[q=20,30])")
-    grid = _parameter_grid(name, rest[:-1])
+    return _parameter_grid(name, rest[:-1])
+
+
+def _size(grid: dict | None) -> int:
+    return math.prod(len(values) for values in grid.values()) if grid else 1
+
+
+def _variants(item: str, grid: dict | None) -> list[Variant]:
+    name = item.partition("[")[0].strip()
+    if grid is None:
+        return [Variant(name)]
     names = list(grid)
     return [Variant(name, dict(zip(names, values))) for values in itertools.product(*grid.values())]
 

@@ -62,7 +62,7 @@ def pytest_configure(config):
         os.environ[FAKE_CPU_SWITCH] = other_cpu_kind() if fake == "other" else fake
     _check_numerics()
     if config.getoption("--full") and not hasattr(config, "workerinput"):
-        from rippleb.engine.dask_worker import _load_modules  # what a Dask worker preloads
+        from rippleb.engine.dask.worker import _load_modules  # what a Dask worker preloads
 
         _load_modules()
 

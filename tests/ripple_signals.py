@@ -52,7 +52,7 @@ def calibration_log(seconds: float = 8.0):
 
 def error_rms(method, calibration, log, skip_s: float = 0.0) -> float:
     """RMS [Nm] of the estimate minus the torque, after ``skip_s`` seconds."""
-    from rippleb.streaming import run_method
+    from rippleb.harness import run_method
 
     estimate, _ = run_method(method, calibration, log)
     k = int(skip_s * SPEC.fs)

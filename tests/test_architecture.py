@@ -33,7 +33,7 @@ TOP_LEVEL_LAYER = {
     "rippleb.__main__": "api",
     "rippleb.testing": "api",
 }
-SUBPACKAGE_LAYER = {"rippleb.simulator": "simulator", "rippleb.engine": "engine",
+SUBPACKAGE_LAYER = {"rippleb.scoring": "core", "rippleb.simulator": "simulator", "rippleb.engine": "engine",
                     "rippleb.report": "report", "rippleb.cli": "cli"}
 
 
@@ -217,3 +217,67 @@ def test_the_checks_see_what_they_forbid(tmp_path):
         "rippleb.report.tables takes the private name _seed_list from rippleb.engine.runner, line 2",
         "rippleb.report.tables takes the private name _split from rippleb.engine.rows, line 3"]
     assert long_modules(found) == [f"rippleb.report.tables: {MAX_LINES + 3} lines (at most {MAX_LINES})"]
+
+
+#: The subpackages in the order docs/architecture.md's tree lists them: lowest layer first.
+TREE_ORDER = ("scoring", "simulator", "engine", "report", "cli")
+#: Written by setuptools-scm at install time, not part of the source (.gitignore).
+GENERATED = {"_version.py"}
+
+
+def _lines(path: Path) -> int:
+    return len(path.read_text().splitlines())
+
+
+def _tree_entries(folder: Path, prefix: str) -> list[str]:
+    """The tree lines of ``folder``'s modules and subfolders (sorted by name), each module
+    with its line count: the listing in docs/architecture.md."""
+    children = sorted([p for p in folder.iterdir() if p.suffix == ".py" or
+                       (p.is_dir() and (p / "__init__.py").exists())], key=lambda p: p.name)
+    out = []
+    for i, child in enumerate(children):
+        last = i == len(children) - 1
+        branch, inner = ("└── ", "    ") if last else ("├── ", "│   ")
+        if child.is_dir():
+            out.append(f"{prefix}{branch}{child.name}/".ljust(31) + layer(module_name(child / "__init__.py")))
+            out += _tree_entries(child, prefix + inner)
+        else:
+            out.append(f"{prefix}{branch}{child.name}".ljust(27) + f"{_lines(child):4d}")
+    return out
+
+
+def package_tree(root: Path = ROOT) -> str:
+    """docs/architecture.md's tree of the package: the top-level modules with their layer,
+    then each subpackage (:data:`TREE_ORDER`) with its modules' line counts."""
+    top = sorted(p for p in root.glob("*.py") if p.name not in GENERATED)
+    lines = [f"{root.name}/"]
+    for path in top:
+        lines.append(f"├── {path.name}".ljust(27) + f"{_lines(path):4d}  {layer(module_name(path, root))}")
+    folders = [root / name for name in TREE_ORDER]
+    for i, folder in enumerate(folders):
+        last = i == len(folders) - 1
+        branch, inner = ("└── ", "    ") if last else ("├── ", "│   ")
+        lines.append(f"{branch}{folder.name}/".ljust(31) + layer(module_name(folder / "__init__.py", root)))
+        lines += _tree_entries(folder, inner)
+    return "\n".join(lines) + "\n"
+
+
+def _documented_tree(doc: Path) -> str:
+    text = doc.read_text()
+    start = text.index("```\nrippleb/\n") + 4
+    return text[start:text.index("```", start)]
+
+
+DOC = ROOT.parent / "docs" / "architecture.md"
+
+
+def test_the_documented_tree_is_the_package():
+    """docs/architecture.md's tree (modules, layers, line counts) is the source's:
+    ``python tests/test_architecture.py`` rewrites it after a change."""
+    assert _documented_tree(DOC) == package_tree(), "run: python tests/test_architecture.py"
+
+
+if __name__ == "__main__":
+    text = DOC.read_text()
+    DOC.write_text(text.replace(_documented_tree(DOC), package_tree()))
+    print(f"{DOC}: tree rewritten")

@@ -294,7 +294,7 @@ def test_scenario_and_log_readers_use_no_code_loaders():
         for banned in ("pickle", "eval(", "exec(", "yaml", "allow_pickle=True", "__import__"):
             assert banned not in source, (name, banned)
     assert "allow_pickle=False" in (root / "engine" / "cache.py").read_text()
-    for name in ("engine/runner.py", "engine/pool.py", "engine/cache.py"):   # the runner never unpickles what a job sends
+    for name in ("engine/runner.py", "engine/process/pool.py", "engine/cache.py"):   # the runner never unpickles what a job sends
         assert "pickle.load" not in (root / name).read_text(), name
 
 

@@ -4,7 +4,7 @@ through the runner's harness on simulated logs."""
 import numpy as np
 import pytest
 
-from rippleb.metrics import TRUTH_ARRAYS, Truth
+from rippleb.scoring.metrics import TRUTH_ARRAYS, Truth
 from rippleb.registry import Registry
 from rippleb.engine.cache import unpack
 from rippleb.engine.jobs import truth_from_message, truth_message
@@ -48,10 +48,13 @@ def test_lowpass_bandwidth_is_its_cutoff(calibration, cutoff):
     row = _row("lowpass", "torque-chirp", calibration, cutoff_hz=cutoff)
     assert row["bandwidth_hz"] == pytest.approx(cutoff, rel=0.08)
     # half a step comes out about one low-frequency group delay, sqrt(2) / (2 pi fc), late
-    # (a little earlier: the step's faster parts pass with less delay, and the ripple on
-    # the true torque's 10 ms rise moves the crossing by a few ms, as for raw)
+    # (the step's faster parts pass with less delay, and the ripple on the true torque's
+    # 10 ms rise moves the crossing by a few ms either way, as for raw, whose crossing the
+    # test above allows 5 ms: measured 23.1 ms at 10 Hz, 1.03 x the delay, with the gauges
+    # on the flexspline and the gear's WG-locked torque, below 1 x before them)
     latency = _row("lowpass", "load-steps", calibration, cutoff_hz=cutoff)["step_latency_ms"]
-    assert 0.5 < latency / (1000 * np.sqrt(2) / (2 * np.pi * cutoff)) < 1.0
+    delay = 1000 * np.sqrt(2) / (2 * np.pi * cutoff)
+    assert 0.5 * delay < latency < delay + 5.0
 
 
 def test_truth_carries_the_scenarios_events():

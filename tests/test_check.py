@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from rippleb.cli.check import run_checks
+from rippleb.engine.checking import in_process
 from rippleb.engine.conformance import checks, subject
 from rippleb.method import Method
 from rippleb.methods.raw import Raw
@@ -32,14 +33,14 @@ class Raises(Method):
 
 def test_every_check_passes_on_raw(capsys):
     listed = checks()
-    assert run_checks(subject(Raw), listed) == len(listed)
+    assert run_checks(in_process(subject(Raw), listed), listed) == len(listed)
     out = capsys.readouterr().out.splitlines()
     assert len(out) == len(listed) and all(line.startswith("  ok  ") for line in out)
 
 
 def test_a_method_that_depends_on_the_block_size_fails_those_checks_only(capsys):
     listed = checks()
-    passed = run_checks(subject(BlockMean), listed)
+    passed = run_checks(in_process(subject(BlockMean), listed), listed)
     out = capsys.readouterr().out.splitlines()
     failed = [line for line in out if line.startswith("  FAIL")]
     assert passed == len(listed) - len(failed) and failed
@@ -49,7 +50,7 @@ def test_a_method_that_depends_on_the_block_size_fails_those_checks_only(capsys)
 
 def test_a_method_that_raises_fails_the_output_check_and_skips_the_others(capsys):
     listed = checks()
-    assert run_checks(subject(Raises), listed) == 0
+    assert run_checks(in_process(subject(Raises), listed), listed) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[0].startswith("  FAIL  output") and out[0].endswith("ValueError: plugin bug")
     assert len(out) == len(listed) and all(line.startswith("  skip") for line in out[1:])

@@ -12,12 +12,14 @@ from hypothesis import strategies as st
 from conftest import off_lock
 from rippleb import InputError, simulate
 from rippleb.simulator.conditions import (AGED_AMPLITUDE_SIGMA, AGED_PHASE_SIGMA, AGED_ZERO_SIGMA, CONDITIONS,
-                                POWER_CYCLE_COOLING_K, SAME_JOINT_CONDITIONS, aged, index_count, index_pulses,
-                                re_assembled)
-from rippleb.metrics import Truth, score
+                                          POWER_CYCLE_COOLING_K, SAME_JOINT_CONDITIONS, aged, index_count, index_pulses,
+                                          re_assembled)
+from rippleb.layouts import GaugeSettings
+from rippleb.scoring.metrics import Truth, score
 from rippleb.scenario import load_scenario, scenario_from_dict
 from rippleb.simulator import Device
-from rippleb.streaming import prepare_blocks, stream
+from rippleb.simulator.flexspline import channel_devices
+from rippleb.harness import prepare_blocks, stream
 
 # sha256 of each column of the logs of the closed-loop flexible joint (docs/physics.md, "Joint
 # dynamics and position controller"), pinned when it replaced the rigid, exactly tracking
@@ -76,10 +78,12 @@ def column_hashes(log) -> dict:
 def test_same_session_reproduces_todays_logs_bit_for_bit():
     if off_lock():
         pytest.skip("bit-exact only with the versions of constraints.txt; installed: " + ", ".join(off_lock()))
-    # with an ideal gear: the transmission error (issue 31) is physics the earlier
-    # simulator did not have; without it, its logs come back bit for bit
+    # with an ideal gear and the drawn bridge: the transmission error (issue 31) and the
+    # gauges' geometry (issue 42) are physics the earlier simulator did not have; without
+    # them, its logs come back bit for bit
     for (scenario, seed), hashes in MAIN_HASHES.items():
-        ideal = dataclasses.replace(load_scenario(scenario), transmission_error=0.0)
+        ideal = dataclasses.replace(load_scenario(scenario), transmission_error=0.0,
+                                    gauges=GaugeSettings(layout="drawn"))
         assert column_hashes(simulate(ideal, seed).log) == hashes
         assert column_hashes(simulate(ideal, seed, "same-session").log) == hashes
 
@@ -265,8 +269,10 @@ def test_re_assembled_ripple_and_gain_are_those_of_the_redrawn_gauges(seed):
     amp1, ph1, _ = ripple_from_log(new)
     drawn = re_assembled(Device.from_seed(seed))
     assert new.device == drawn
-    old_amp, old_phase = true_ripple(base.device, load)
-    new_amp, new_phase = true_ripple(drawn, load)
+    # what the bridge reads: the redrawn field through the re-bonded gauges
+    assert new.gauges == tuple(channel_devices(drawn, GaugeSettings(), 40.0, rebonded=True))
+    old_amp, old_phase = true_ripple(base.gauges[0], load)
+    new_amp, new_phase = true_ripple(new.gauges[0], load)
     big = (old_amp > 0.1) & (new_amp > 0.1)
     # the change seen in the logs is the change of the redrawn gauges at that load
     np.testing.assert_allclose(amp1[big] / amp0[big], new_amp[big] / old_amp[big], rtol=0.03)

@@ -18,7 +18,7 @@ import time
 import pandas as pd
 import pytest
 
-from rippleb.engine.pool import Pool
+from rippleb.engine.process.pool import Pool
 from test_bad_input import _dist  # a minimal installed distribution without pip
 
 GIB = 2**30

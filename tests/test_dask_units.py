@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import pandas as pd
 import pytest
 
-from rippleb.engine.dask_executor import _fields
+from rippleb.engine.dask.executor import _fields
 from rippleb.numerics import openblas_threads
 from rippleb.engine.executors import RowTask, run_task
 from rippleb.registry import Registry
@@ -107,7 +107,7 @@ def test_a_worker_restarts_a_dead_fork_server_only_without_truths(monkeypatch):
     again only when no row runs here, and the memo (with its truths) is dropped first."""
     import signal
 
-    from rippleb.engine import dask_worker as dx
+    from rippleb.engine.dask import worker as dx
 
     monkeypatch.setattr(dx, "_server", [])
     monkeypatch.setattr(dx, "_running", [0])
@@ -136,7 +136,7 @@ def test_rows_on_a_dask_worker_reuse_their_heap_like_local_rows():
     import sys
 
     code = ("import os, resource, numpy as np\n"
-            "import rippleb.engine.dask_worker as dx\n"
+            "import rippleb.engine.dask.worker as dx\n"
             "if os.environ.get('UNDO') == 'direct': dx._default_malloc()\n"
             "if os.environ.get('UNDO') == 'worker':\n"
             "    dx._enter_row(); dx._leave_row(); dx._server[0].close()\n"
@@ -165,7 +165,7 @@ def test_quiet_settings_reach_dask_processes_as_environment(tmp_path):
     import subprocess
     import sys
 
-    from rippleb.engine.dask_executor import QUIET_CONFIG, quiet_environment
+    from rippleb.engine.dask.executor import QUIET_CONFIG, quiet_environment
 
     code = ("import dask, distributed, json\n"
             f"print(json.dumps({{k: dask.config.get(k) for k in {list(QUIET_CONFIG)!r}}}))\n")
@@ -182,7 +182,7 @@ def test_the_local_cluster_runs_with_the_quiet_settings():
     nannies) run with QUIET_CONFIG, and the settings do not leak past the run."""
     import dask
 
-    from rippleb.engine.dask_executor import QUIET_CONFIG, DaskExecutor
+    from rippleb.engine.dask.executor import QUIET_CONFIG, DaskExecutor
 
     with DaskExecutor(workers=1)._client() as client:
         workers = client.run(lambda: dask.config.get("distributed.worker.profile.enabled"))
@@ -197,7 +197,7 @@ def test_the_scale_page_lists_the_quiet_settings():
     """docs/scale.md tells users of hand-started workers what to export: exactly these."""
     from pathlib import Path
 
-    from rippleb.engine.dask_executor import quiet_environment
+    from rippleb.engine.dask.executor import quiet_environment
 
     page = (Path(__file__).parents[1] / "docs" / "scale.md").read_text()
     exported = dict(line.removeprefix("export ").split("=", 1) for line in page.splitlines()

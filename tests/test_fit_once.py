@@ -9,7 +9,7 @@ import pytest
 
 import rippleb
 from rippleb import Method
-from rippleb.metrics import Truth
+from rippleb.scoring.metrics import Truth
 from rippleb.engine.runner import evaluate
 from test_runner import fake_simulate
 

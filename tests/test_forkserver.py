@@ -4,8 +4,8 @@ import os
 
 import pytest
 
-from rippleb.engine.forkserver import ForkServer
-from rippleb.engine.pool import Pool
+from rippleb.engine.process.forkserver import ForkServer
+from rippleb.engine.process.pool import Pool
 
 SECRET = []  # filled by the test after the server was forked: the job must not see it
 

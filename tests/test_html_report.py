@@ -12,7 +12,8 @@ import pandas as pd
 import pytest
 
 from rippleb.report import html_report
-from rippleb.metrics import METRIC_COLUMNS
+from rippleb.report.stats import METHOD_ORDER
+from rippleb.scoring.metrics import METRIC_COLUMNS
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -65,7 +66,8 @@ def test_page_shows_the_tuning_the_run_recorded(tmp_path):
     page = html_report.write_html(conditions_frame(), prov, tmp_path / "index.html").read_text()
     adopted = read_record()["methods"]["order-tracking"]["adopted"]
     assert page.count('class="sortable"') == 5  # and the tuning table
-    assert f"`q` = {adopted['q']:g}" in page   # table cells are plain text
+    # a table cell's Markdown is rendered as the README renders it: its code spans as <code>
+    assert f"<code>q</code> = {adopted['q']:g}" in page
 
 
 def test_hover_of_every_row_names_method_scenario_condition_and_seed(tmp_path):
@@ -120,25 +122,23 @@ def test_page_renders_in_headless_chromium_without_javascript_errors(tmp_path):
     if keep:  # for a person to look at
         shutil.copyfile(shot, keep)
 
-    # issue 39: fourteen methods, one condition: every section, the note, the tables best
-    # first and fourteen legend entries, as the browser shows them
-    text, _page, _out = _rendered(tmp_path, fourteen_frame(), "fourteen")
+    # issue 39: every built-in method, one condition: every section, the note, the tables best
+    # first and a legend entry per method, as the browser shows them
+    text, _page, _out = _rendered(tmp_path, builtins_frame(), "builtins")
     for title in ("Reading these tables", "What each method did with the gear's real torque",
                   "Each method in plain words", "How timing was taken"):
         assert re.search(rf">{re.escape(title)}</h[23]>", text), title
     assert re.search(r'id="conditions-note">Only the condition <code>same-session</code> ran', text)
     assert text.count('class="legendtoggle"') >= len(BUILTINS), "the legend lost a method"
     summary = text[text.index("Method x condition"):]
-    assert re.findall(r'<tr><td class="text" data-v="">([a-z-]+)</td>', summary)[0] == "gear-aware"
+    assert re.findall(r'<tr><td class="text" data-v="">([a-z-]+)</td>', summary)[0] == BUILTINS[-1]
 
 
 # ------------------------------------------------------------------ issue 39: the page says why
-BUILTINS = ["raw", "lowpass", "current-based", "order-tracking", "order-tracking-no-deadzone",
-            "order-tracking-no-backprop", "switched-notch", "kalman-ripple", "angle-adaptive",
-            "angle-adaptive-frozen", "spatial-filter", "fourier-lms", "periodic-dob", "gear-aware"]
+BUILTINS = list(METHOD_ORDER)
 
 
-def fourteen_frame(conditions=("same-session",), seeds=3):
+def builtins_frame(conditions=("same-session",), seeds=3):
     """Every built-in method on two scenarios, its error falling with its place in BUILTINS
     reversed (gear-aware best), with the gear's columns."""
     rng = np.random.default_rng(5)
@@ -152,7 +152,7 @@ def fourteen_frame(conditions=("same-session",), seeds=3):
                                  "status": "ok", "message": "",
                                  "rms_error_nm": level * (1 + 0.02 * rng.standard_normal()),
                                  "max_error_nm": 3 * level, "rms_error_ref_nm": level, "max_error_ref_nm": 3 * level,
-                                 "delay_ms": 1.0, "gear_torque_rms_nm": 0.5, "gear_erased_fraction": 0.05 * i,
+                                 "delay_ms": 1.0, "gear_torque_rms_nm": 0.5, "gear_removed_fraction": 0.05 * i,
                                  "rms_error_without_gear_nm": level / 2, "us_per_tick_p50": 5.0,
                                  "us_per_tick_p99": 12.0})
     return pd.DataFrame(rows).reindex(columns=list(dict.fromkeys([*rows[0], *METRIC_COLUMNS])))
@@ -162,10 +162,11 @@ def test_the_page_says_what_the_readme_explains_from_the_same_text(tmp_path):
     """Issue 39: the page left out "Reading these tables", "What each method did with the gear's
     real torque" and "Each method in plain words"; each is now the README's own Markdown."""
     from rippleb.report.markdown_html import inline_html, markdown_html
-    from rippleb.report.sections import READING_SIMULATED, gear_section, verdicts_section
+    from rippleb.report.gear_section import gear_markdown
+    from rippleb.report.sections import READING_SIMULATED, verdicts_section
     from rippleb.report.writer import readme_markdown
 
-    frame = fourteen_frame(("same-session", "re-assembled"))
+    frame = builtins_frame(("same-session", "re-assembled"))
     page = html_report.write_html(frame, PROV, tmp_path / "index.html").read_text()
     readme = readme_markdown(frame, {**PROV, "report": PROV["report"], "seeds_text": "0-2", "rows": len(frame),
                                      "statuses": {"ok": len(frame)}}, {})
@@ -174,35 +175,34 @@ def test_the_page_says_what_the_readme_explains_from_the_same_text(tmp_path):
         assert f">{html.escape(title)}</h" in page and f"# {title}" in readme, title
     assert markdown_html(READING_SIMULATED) in page
     sections = html_report.with_condition(frame)
-    for text in (gear_section(sections), verdicts_section(sections)):
+    for text in (gear_markdown(sections), verdicts_section(sections)):
         for line in [t for t in text if t.startswith("- ")]:   # each sentence, from the one source
             assert f"<li>{inline_html(line[2:])}</li>" in page, line
 
 
 def test_every_table_starts_best_first(tmp_path):
     """Issue 39: the page's tables were in registry order."""
-    page = html_report.write_html(fourteen_frame(), PROV, tmp_path / "index.html").read_text()
+    page = html_report.write_html(builtins_frame(), PROV, tmp_path / "index.html").read_text()
     summary = page[page.index("Method x condition"):]
     first_rows = re.findall(r'<tr><td class="text" data-v="">([a-z-]+)</td>', summary)
-    assert first_rows[:len(BUILTINS)] == BUILTINS[::-1], first_rows[:5]   # gear-aware has the lowest mean
+    assert first_rows[:len(BUILTINS)] == BUILTINS[::-1], first_rows[:5]   # the last has the lowest mean
     metrics = page[page.index("All metrics under"):]
-    assert re.findall(r'<tr><td class="text">([a-z-]+)</td>', metrics)[:3] == ["gear-aware", "periodic-dob",
-                                                                              "fourier-lms"]
+    assert re.findall(r'<tr><td class="text">([a-z-]+)</td>', metrics)[:3] == BUILTINS[::-1][:3]
 
 
-def test_fourteen_methods_are_told_apart_by_colour_marker_and_dash(tmp_path):
+def test_every_built_in_method_is_told_apart_by_colour_marker_and_dash(tmp_path):
     from rippleb.report.palette import look
 
     looks = [look(m, i) for i, m in enumerate(BUILTINS + ["plugin-a", "plugin-b", "plugin-c"])]
     assert len({(colour, marker) for colour, marker, _ in looks}) == len(looks)   # markers alone tell them apart
     assert len({colour for colour, _, _ in looks}) >= 7
-    fig = html_report._rows_figure(html_report.with_condition(fourteen_frame()))
+    fig = html_report._rows_figure(html_report.with_condition(builtins_frame()))
     shown = {(t.marker.color, t.marker.symbol) for t in fig.data}
     assert len(shown) == len(BUILTINS) == len(fig.data)
 
 
 def test_a_run_of_one_condition_says_how_to_run_the_others(tmp_path):
-    one = html_report.write_html(fourteen_frame(), PROV, tmp_path / "one.html").read_text()
+    one = html_report.write_html(builtins_frame(), PROV, tmp_path / "one.html").read_text()
     assert 'id="conditions-note"' in one and "<code>rippleb run --conditions all</code>" in one
     two = html_report.write_html(conditions_frame(), PROV, tmp_path / "two.html").read_text()
     assert 'id="conditions-note"' not in two

@@ -7,6 +7,7 @@ cache, truth read from the cache, processes left behind, the runner signalled, i
 that hang or exit.
 """
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -164,11 +165,12 @@ NAPPER = textwrap.dedent(f'''
     NAPPING = {NAPPING!r}
 
     class Napper(Method):
-        """Sleeps in its fit (to be interrupted) in a run started with HOSTILE_NAP set, and
-        says so on its log, the one file it may write (issue 34); not in a resumed run."""
+        """Sleeps in its fit (to be interrupted) while a file NAP lies beside its module (it may
+        ask whether a file exists, not read it, and it inherits no environment: issue 41),
+        and says so on its log, the one file it may write (issue 34)."""
         name = "napper"
         def fit(self, calibration):
-            if os.environ.get("HOSTILE_NAP"):
+            if os.path.exists(os.path.join(os.path.dirname(__file__), "NAP")):
                 print(NAPPING, flush=True)
                 time.sleep(3600)
         def step(self, block):
@@ -188,6 +190,17 @@ def site(tmp_path_factory):
     _dist(site, "rippleb-exits", "rippleb_exits", EXITS, {"exits": "Anything"})
     _dist(site, "rippleb-napper", "rippleb_napper", NAPPER, {"napper": "Napper"})
     return site
+
+
+@contextlib.contextmanager
+def nap(site):
+    """The napper sleeps in its fit while this block runs (a file NAP beside its module)."""
+    flag = Path(site) / "NAP"
+    flag.touch()
+    try:
+        yield
+    finally:
+        flag.unlink(missing_ok=True)
 
 
 def napping(out) -> bool:
@@ -268,12 +281,13 @@ def test_where_the_cache_is_writable_a_rewrite_fails_the_rows_it_tampered(tmp_pa
     """Without a mount namespace and without Landlock (a kernel that refuses both) the worker
     can write the cache; the SHA-256 of every cached file, taken before any method ran, still
     catches it. (With Landlock alone the rewrite is refused: tests/test_hostile.py.)"""
-    from rippleb.engine import isolation, sandbox
+    from rippleb.engine.process import isolation, landlock
 
     namespace = {}
     exec(HOSTILE, namespace)
-    monkeypatch.setattr(isolation, "NAMESPACE_CHOICES", isolation.NAMESPACE_CHOICES[1:])  # no mount namespace
-    monkeypatch.setattr(sandbox, "_landlock", lambda scratch: False)                       # nor Landlock
+    monkeypatch.setattr(isolation, "NAMESPACE_CHOICES",   # no mount namespace
+                        tuple(c for c in isolation.NAMESPACE_CHOICES if not c[1].mount))
+    monkeypatch.setattr(landlock, "restrict", lambda *args, **kwargs: ["Landlock"])          # nor Landlock
     (tmp_path / "tmp").mkdir()
     monkeypatch.setenv("TMPDIR", str(tmp_path / "tmp"))   # the forger rewrites this run's cache only
     monkeypatch.setattr("tempfile.tempdir", None)
@@ -314,16 +328,16 @@ def test_a_running_directory_is_locked_and_an_interrupted_one_resumable(site, tm
     args = [sys.executable, "-m", "rippleb", "run", "--methods", "napper,raw", "--scenarios", "static-contact",
             "--seeds", "1", "--jobs", "1", "--no-progress", "--out", str(out)]
     env = _env(site, tmp_path)
-    runner = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                              env={**env, "HOSTILE_NAP": "1"})
-    while not napping(out):    # the napper's fit is running: no row finished
-        assert runner.poll() is None
-        time.sleep(0.02)
-    second = subprocess.run(args[:-2] + ["--resume", str(out)], capture_output=True, text=True,
-                            timeout=120, env=env)
-    assert second.returncode == 2 and "another rippleb run is writing this directory" in second.stderr
-    runner.send_signal(signal.SIGTERM)
-    _, err = runner.communicate(timeout=60)
+    with nap(site):
+        runner = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+        while not napping(out):    # the napper's fit is running: no row finished
+            assert runner.poll() is None
+            time.sleep(0.02)
+        second = subprocess.run(args[:-2] + ["--resume", str(out)], capture_output=True, text=True,
+                                timeout=120, env=env)
+        assert second.returncode == 2 and "another rippleb run is writing this directory" in second.stderr
+        runner.send_signal(signal.SIGTERM)
+        _, err = runner.communicate(timeout=60)
     assert runner.returncode == 130, err
     assert "no row had finished" in err and f"rippleb run --resume {out}" in err
     before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
@@ -363,13 +377,13 @@ def test_no_process_outlives_its_row(tmp_path, monkeypatch, namespaces, register
     import importlib
 
     import rippleb
-    from rippleb.engine import isolation
+    from rippleb.engine.process import isolation
 
     (tmp_path / "spawns_mod.py").write_text(SPAWNS)
     monkeypatch.syspath_prepend(str(tmp_path))
     cls = importlib.import_module("spawns_mod").Spawns
     if not namespaces:
-        monkeypatch.setattr(isolation, "new_namespaces", lambda: (False, False))
+        monkeypatch.setattr(isolation, "new_namespaces", lambda: isolation.NONE)
     register_methods(cls)
     frame = rippleb.run(methods="spawns", scenarios="static-contact", seeds=1)
     assert list(frame.status) == ["ok"], frame.message.tolist()
@@ -401,11 +415,11 @@ def test_a_job_that_signals_its_group_cannot_kill_its_keeper(monkeypatch, namesp
     the job reports; without one the worker ends itself, and the keeper lives to report the
     signal (before, it died with it, and the row's cause was lost or, when the worker was
     still fast enough, the row was saved by luck)."""
-    from rippleb.engine import isolation
-    from rippleb.engine.pool import Pool
+    from rippleb.engine.process import isolation
+    from rippleb.engine.process.pool import Pool
 
     if not namespaces:
-        monkeypatch.setattr(isolation, "new_namespaces", lambda: (False, False))
+        monkeypatch.setattr(isolation, "new_namespaces", lambda: isolation.NONE)
     job = _signals_its_group_and_parent if namespaces else _signals_its_group
     expected = ("done", b"reported") if namespaces else ("died", -signal.SIGTERM)
     outcomes = []

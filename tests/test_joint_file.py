@@ -12,10 +12,10 @@ from hypothesis import strategies as st
 
 from rippleb import InputError, JointSpec, read_log
 from rippleb.joint_file import description_for, load_joint
-from rippleb.metrics import Truth
-from rippleb.scorable import NO_REFERENCE, implausible
+from rippleb.scoring.metrics import Truth
+from rippleb.scoring.scorable import NO_REFERENCE, implausible
 from rippleb.timebase import check_steps, resample, sample_periods, to_seconds, uniform_rate
-from rippleb.engine.jobs import score_or_invalid
+from rippleb.scoring.row import score_or_invalid
 
 FS = 20_000.0
 

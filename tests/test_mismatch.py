@@ -150,7 +150,7 @@ def test_load_saturation_bends_the_amplitude_by_the_documented_curve():
     s, seed = 2.3, 7
     off = simulate(cruise(load=12.0), seed)
     on = simulate(cruise({"mismatch": {"load_saturation": s}}, load=12.0), seed)
-    dev, rated = off.device, off.scenario.spec.rated_torque
+    dev, rated = off.gauges[0], off.scenario.spec.rated_torque
     tau = np.abs(off.log.torque_true[off.log.t >= 0.4]).mean()
     a, b = dict(zip(dev.ripple_orders, dev.ripple_base)), dict(zip(dev.ripple_orders, dev.ripple_load))
     for k in (2, 4):

@@ -277,7 +277,7 @@ def _simulation(scenario, seed):
 @functools.lru_cache(maxsize=None)
 def _scores(cls, scenario, seed):
     """The runner's result columns of one method on one scenario and seed (cached)."""
-    from rippleb.metrics import Truth
+    from rippleb.scoring.metrics import Truth
     from rippleb.engine.runner import evaluate
 
     sim = _simulation(scenario, seed)
@@ -348,7 +348,7 @@ def test_ripple_at_orders_2_4_8_falls_by_20_db_at_constant_speed(seed, tmp_path)
     from rippleb.methods.raw import Raw
     from rippleb.scenario import load_scenario
     from rippleb.simulator import simulate
-    from rippleb.streaming import run_method
+    from rippleb.harness import run_method
 
     path = tmp_path / "constant-speed.toml"
     path.write_text(CONSTANT_SPEED)

@@ -90,7 +90,7 @@ def test_ripple_is_a_constant_offset_at_rest_and_continues_after_restart():
         "load": [{"torque": 15.0, "start": 0.0, "rise": 0.05, "known": True}],
     }, name="rest")
     sim = simulate(sc, 3)
-    dev, log = sim.device, sim.log
+    dev, log = sim.gauges[0], sim.log          # the device as its one bridge reads it
     ripple = dev.ripple(sim.wave_angle, log.torque_true)
     # The closed loop settles in about 4 / (zeta w_c) after the stop (docs/physics.md,
     # "Joint dynamics and position controller"); then the motor creeps by a count or two

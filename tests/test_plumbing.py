@@ -50,10 +50,13 @@ PROBER = textwrap.dedent('''
         os.close(fd)
         return "opened"
 
-    def probe():
-        runner = int(os.environ["PROBE_RUNNER"])
+    def probe(runner, run_dir):
         me = int(os.readlink("/proc/self"))   # its PID as this /proc counts (os.getpid() is 1)
-        found = {"visible": sorted(int(p) for p in os.listdir("/proc") if p.isdigit()), "opened": []}
+        try:
+            visible = sorted(int(p) for p in os.listdir("/proc") if p.isdigit())
+        except OSError:                       # Landlock: only its own entry of the host's /proc
+            visible = [me]
+        found = {"visible": visible, "opened": []}
         for pid in found["visible"]:
             if pid == me:
                 continue
@@ -70,7 +73,6 @@ PROBER = textwrap.dedent('''
                     rippleb_process = pid == runner or runner in _ancestors(pid)
                     found["opened"].append([pid, fd, target, rippleb_process])
         found["terminals"] = {p: _try_write(p) for p in glob.glob("/dev/pts/[0-9]*")}
-        run_dir = os.environ["PROBE_RUN_DIR"]
         found["run_dir"] = {name: _try_write(os.path.join(run_dir, name)) for name in ("forged.txt", "results.csv")}
         caches = glob.glob(os.path.join(os.environ.get("TMPDIR", "/tmp"), "rippleb-cache-*"))
         found["cache"] = {c: _try_write(os.path.join(c, "forged.npz")) for c in caches}
@@ -84,17 +86,22 @@ PROBER = textwrap.dedent('''
         print("FOUND " + json.dumps(found), flush=True)   # its log: it may write nowhere else (issue 34)
 
     class Prober(Method):
-        """Probes the runner's plumbing, then returns zeros."""
+        """Probes the runner's plumbing (``runner``: the runner's PID, 0 unknown), then returns zeros."""
         name = "prober"
+        def __init__(self, run_dir="", runner=0):
+            self.run_dir, self.runner = run_dir, runner
+        def get_params(self):
+            return {}
         def reset(self, spec):
-            probe()
+            probe(self.runner, self.run_dir)
         def step(self, block):
             return np.zeros(len(block))
 ''')
 
 
 def _reports(run_dir):
-    return [json.loads(line[len("FOUND "):]) for p in sorted((run_dir / "logs").glob("prober--*"))
+    return [json.loads(line[len("FOUND "):]) for p in sorted((run_dir / "logs").glob("prober*"))
+            if not p.name.startswith("fit--")
             for line in p.read_text().splitlines() if line.startswith("FOUND ")]
 
 
@@ -118,9 +125,9 @@ def test_a_confined_worker_sees_nothing_of_the_run(site, tmp_path):
     and the cache read-only; its forged summary lines end in its own log."""
     run_dir = tmp_path / "run"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]),
-           "TMPDIR": str(tmp_path), "PROBE_RUN_DIR": str(run_dir),
-           "PROBE_RUNNER": "0", "RIPPLEB_KEY_FILE": str(tmp_path / "key")}
-    proc = subprocess.Popen([sys.executable, "-m", "rippleb", "run", "--methods", "prober,raw", "--scenarios",
+           "TMPDIR": str(tmp_path), "RIPPLEB_KEY_FILE": str(tmp_path / "key")}
+    prober = f'prober[run_dir="{run_dir}"]'
+    proc = subprocess.Popen([sys.executable, "-m", "rippleb", "run", "--methods", f"{prober},raw", "--scenarios",
                              "static-contact", "--seeds", "1", "--jobs", "2", "--no-progress", "--out", str(run_dir)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     out, err = proc.communicate(timeout=300)
@@ -134,27 +141,28 @@ def test_a_confined_worker_sees_nothing_of_the_run(site, tmp_path):
     assert "12 rows (12 ok)" not in out + err
     assert "2 rows (2 ok)" in out + err
     rows = pd.read_csv(run_dir / "results.csv")
-    assert sorted(rows.method) == ["prober", "raw"] and (rows.status == "ok").all()
-    assert "12 rows (12 ok)" in (run_dir / "logs" / "prober--static-contact--same-session--0.txt").read_text()
+    assert sorted(rows.method) == [prober, "raw"] and (rows.status == "ok").all()
+    assert any("12 rows (12 ok)" in p.read_text() for p in (run_dir / "logs").glob("prober*"))
 
 
 def test_without_a_mount_namespace_the_plumbing_stays_closed(tmp_path, monkeypatch, register_methods):
-    """A kernel that refuses the mount namespace: the worker sees the host's processes, but
-    every rippleb process (runner, fork server, keepers) is not dumpable, so none of their
+    """A kernel that refuses the mount namespace (and Landlock, which would hide the host's
+    /proc but the worker's own entry): the worker sees the host's processes, but every
+    rippleb process (runner, fork server, keepers) is not dumpable, so none of their
     descriptors opens; the run directory is still only rippleb's to write, by its rows."""
-    from rippleb.engine import isolation
+    from rippleb.engine.process import isolation, landlock
 
     namespace = {}
     exec(PROBER, namespace)
-    monkeypatch.setattr(isolation, "NAMESPACE_CHOICES", isolation.NAMESPACE_CHOICES[1:])  # no mount namespace
+    monkeypatch.setattr(isolation, "NAMESPACE_CHOICES",   # no mount namespace
+                        tuple(c for c in isolation.NAMESPACE_CHOICES if not c[1].mount))
+    monkeypatch.setattr(landlock, "restrict", lambda *args, **kwargs: ["Landlock"])
     run_dir = tmp_path / "run"
-    for name, value in {"PROBE_RUN_DIR": run_dir, "PROBE_RUNNER": os.getpid(),
-                        "TMPDIR": tmp_path}.items():
-        monkeypatch.setenv(name, str(value))
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
     monkeypatch.setattr("tempfile.tempdir", None)
     register_methods(namespace["Prober"])
-    frame = rippleb.run(methods="prober,raw", scenarios="static-contact", seeds=1, jobs=2, out=run_dir,
-                        progress=False)
+    frame = rippleb.run(methods=f'prober[run_dir="{run_dir}",runner={os.getpid()}],raw', scenarios="static-contact",
+                        seeds=1, jobs=2, out=run_dir, progress=False)
     assert (frame.status == "ok").all(), frame.message.tolist()
     (found,) = _reports(run_dir)
     assert len(found["visible"]) > 1                   # the host's /proc: this is the weaker case
@@ -196,9 +204,9 @@ def test_garbage_in_the_control_pipe_ends_that_job_only(monkeypatch, garbage, sa
     opens nothing, as an unprivileged one."""
     import functools
 
-    from rippleb.engine import isolation
-    from rippleb.engine import sandbox as walls
-    from rippleb.engine.pool import Pool
+    from rippleb.engine.process import isolation
+    from rippleb.engine.process import sandbox as walls
+    from rippleb.engine.process.pool import Pool
 
     monkeypatch.setattr(isolation, "NAMESPACE_CHOICES", ())   # the kernel refuses namespaces
     if not sandbox:
@@ -213,15 +221,15 @@ def test_garbage_in_the_control_pipe_ends_that_job_only(monkeypatch, garbage, sa
     if os.geteuid() == 0 and not sandbox:
         assert finished["attacker"].kind == "garbled", finished["attacker"]
     else:   # the keeper is not dumpable: an unprivileged worker cannot open its pipes
-        assert finished["attacker"] == finished["attacker"].__class__("attacker", "done", b"wrote 0",
-                                                                      finished["attacker"].wall_s)
+        attacker = finished["attacker"]
+        assert attacker == attacker.__class__("attacker", "done", b"wrote 0", attacker.wall_s, attacker.method_s)
 
 
 def test_the_control_parser_never_raises_and_reads_only_what_a_keeper_writes():
     from hypothesis import given
     from hypothesis import strategies as st
 
-    from rippleb.engine.pool import control
+    from rippleb.engine.process.pool import control
 
     @given(st.binary(max_size=40))
     def anything(data):
@@ -229,9 +237,10 @@ def test_the_control_parser_never_raises_and_reads_only_what_a_keeper_writes():
         assert parsed is None or all(v is None or isinstance(v, int) for v in parsed)
 
     anything()
-    assert control(b"") == (None, None)
-    assert control(b"123 1") == (None, None)            # cut short by a read
-    assert control(b"123 1\n") == (123, None)
-    assert control(b"123 0\n-9\n") == (123, -9)
+    assert control(b"") == (None, None, None)
+    assert control(b"123 1") == (None, None, None)            # cut short by a read
+    assert control(b"123 1\n") == (123, None, None)
+    assert control(b"123 0\n-9 -1\n") == (123, -9, -1)     # the method never started
+    assert control(b"123 0\n0 1500000\n") == (123, 0, 1500000)
     for forged in (b"x", b"123 1\n0\n0\n", b"123 1\nexit 0\n", b"123 2\n", b"123 1\n12345\n"):
         assert control(forged) is None, forged

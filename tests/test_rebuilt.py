@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rippleb.rebuilt import MIN_REVOLUTIONS, rebuilt_torque, rms_error_rebuilt_nm
+from rippleb.scoring.rebuilt import MIN_REVOLUTIONS, rebuilt_torque, rms_error_rebuilt_nm
 
 FS = 2000.0
 

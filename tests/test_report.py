@@ -145,8 +145,24 @@ def test_table_one_replica_from_a_synthetic_frame():
 
 def test_table_one_markdown_states_numbers_from_the_data():
     text = report.table_one_markdown(_frame(_table_one_rows()))
-    assert "| Error max [Nm]" in text and "56 %" in text and "58 %" in text
+    assert "| Error max, whole log [Nm]" in text and "56 %" in text and "58 %" in text
     assert "order tracking is lower than current-based (5 vs 9 Nm, ratio 56 %), as in the paper" in text
+    assert "during the motion [Nm]" not in text   # rows written before the columns existed
+
+
+def test_table_one_has_a_row_scored_during_the_motion_beside_the_whole_log():
+    rows = _table_one_rows()
+    for row in rows:   # during the motion: current-based's max is at a stop, order-tracking's in the motion
+        row["max_error_ref_motion_nm"] = row.get("max_error_ref_nm", np.nan) * (
+            0.5 if row["method"] == "current-based" else 1.0)
+        row["rms_error_ref_motion_nm"] = row.get("rms_error_ref_nm", np.nan)
+    table = report.table_one(_frame(rows))
+    assert list(table.index) == ["max", "rms", "max_motion", "rms_motion"]
+    assert table.loc["max_motion", "ratio_pct"] == pytest.approx(100 * 5 / 4.5)
+    assert table.loc["max_motion", "paper_ratio_pct"] == 58.0 and table.loc["rms_motion", "paper_ratio_pct"] == 64.0
+    text = report.table_one_markdown(_frame(rows))
+    assert "| Error max, during the motion [Nm]" in text and "111 %" in text
+    assert "maximum error during the motion: order tracking is higher than current-based" in text
 
 
 def test_table_one_needs_both_methods():
@@ -292,7 +308,8 @@ def test_report_through_the_cli_on_a_tiny_run(tmp_path, capsys):
     prov = json.loads((pub / "provenance.json").read_text())
     assert prov["seeds"] == [0, 1] and prov["figure_seed"] == 1
     assert prov["run"]["command"] == recorded["command"]
-    for name in ("fig2_order_spectra", "fig4_trajectory", "fig5_ripple_compensation", "fig6_estimates", "error_vs_speed",
+    assert "order 4 the largest line on" in readme   # the population's Fig. 2, re-simulated
+    for name in ("fig2_order_spectra", "fig2_orders_vs_speed", "fig4_trajectory", "fig5_ripple_compensation", "fig6_estimates", "error_vs_speed",
                  "residual_spectra", "accuracy_vs_cost"):
         assert f"figures/{name}.png" in readme
         assert _is_png(pub / "figures" / f"{name}.png")

@@ -130,16 +130,17 @@ def test_an_interrupted_sealed_run_keeps_its_salt_and_resumes_with_it(site, tmp_
 
     args = [sys.executable, "-m", "rippleb", "run", "--methods", "napper,raw", "--scenarios", "static-contact",
             "--seeds", "1", "--jobs", "1", "--no-progress", "--out", "run", "--sealed", "salt"]
-    from test_integrity import napping
+    from test_integrity import nap, napping
 
-    runner = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                              env={**_env(site, tmp_path), "HOSTILE_NAP": "1"}, cwd=tmp_path)
-    while not napping(tmp_path / "run"):    # the napper's fit is running
-        assert runner.poll() is None
-        assert not (tmp_path / "salt").exists()         # no file holds the salt while methods run
-        time.sleep(0.02)
-    runner.send_signal(signal.SIGTERM)
-    _, err = runner.communicate(timeout=60)
+    with nap(site):
+        runner = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                  env=_env(site, tmp_path), cwd=tmp_path)
+        while not napping(tmp_path / "run"):    # the napper's fit is running
+            assert runner.poll() is None
+            assert not (tmp_path / "salt").exists()         # no file holds the salt while methods run
+            time.sleep(0.02)
+        runner.send_signal(signal.SIGTERM)
+        _, err = runner.communicate(timeout=60)
     assert runner.returncode == 130, err
     assert "the salt is in salt" in err and "rippleb run --resume run --salt-file FILE" in err
     resumed = _cli(site, tmp_path, "run", "--resume", "run", "--salt-file", "salt", "--no-progress")
@@ -168,12 +169,16 @@ class Seeker(Method):
     """Searches its own process and every file and variable it can reach for the salt."""
 
     name = "seeker"
+    #: Where it writes its report and the directories it searches: set by the test before
+    #: the run, inherited by its process (which inherits no environment: issue 41).
+    out = ""
+    dirs = ()
 
     def reset(self, spec):
         windows, ints, blobs = _search_memory(MARK, 32)
         found = {"windows": windows, "ints": ints, "bytes32": blobs, "environ": dict(os.environ),
-                 "files": _reachable_files()}
-        with open(os.environ["SEEKER_OUT"] + "." + os.urandom(8).hex(), "w") as fh:  # PID 1 in every namespace
+                 "files": _reachable_files(self.dirs)}
+        with open(self.out + "." + os.urandom(8).hex(), "w") as fh:  # PID 1 in every namespace
             json.dump(found, fh)
 
     def step(self, block):
@@ -230,11 +235,11 @@ def _find_all(data: bytes, pattern: bytes):
         at = data.find(pattern, at + 1)
 
 
-def _reachable_files():
+def _reachable_files(dirs):
     """The text of every file in the directories the test names (run directory, temporary
     directory of the cache) and of every path on this process's command line."""
     paths = [a for a in sys.argv if os.path.exists(a)]
-    for root in os.environ["SEEKER_DIRS"].split(os.pathsep):
+    for root in dirs:
         for folder, _, names in os.walk(root):
             paths += [os.path.join(folder, n) for n in names]
     texts = {}
@@ -249,14 +254,14 @@ def _reachable_files():
 
 def _seek(tmp_path, monkeypatch, register_methods, seeds: int):
     """A sealed run of the seeker; returns the salt, its device seeds and the seekers' reports."""
-    from rippleb.engine import sandbox
+    from rippleb.engine.process import landlock
 
     keep = (DECOY_BYTES, DECOY_INT)  # noqa: F841 - alive in this process when it forks the server
     # Landlock off, so the seeker can write its (large) report outside its scratch directory:
     # it changes nothing in memory, the environment or what files exist, which it searches.
-    monkeypatch.setattr(sandbox, "_landlock", lambda scratch: True)
-    monkeypatch.setenv("SEEKER_OUT", str(tmp_path / "found"))
-    monkeypatch.setenv("SEEKER_DIRS", os.pathsep.join([str(tmp_path / "run"), str(tmp_path / "tmp")]))
+    monkeypatch.setattr(landlock, "restrict", lambda *args, **kwargs: [])
+    monkeypatch.setattr(Seeker, "out", str(tmp_path / "found"))
+    monkeypatch.setattr(Seeker, "dirs", (str(tmp_path / "run"), str(tmp_path / "tmp")))
     (tmp_path / "tmp").mkdir()
     monkeypatch.setenv("TMPDIR", str(tmp_path / "tmp"))
     monkeypatch.setattr("tempfile.tempdir", None)

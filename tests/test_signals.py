@@ -25,9 +25,9 @@ import pytest
 
 from rippleb import interrupts
 from rippleb.cli import program as cli
-from rippleb.engine import forkserver, isolation
-from rippleb.engine.forkserver import ForkServer
-from rippleb.engine.pool import Pool
+from rippleb.engine.process import forkserver, isolation
+from rippleb.engine.process.forkserver import ForkServer
+from rippleb.engine.process.pool import Pool
 
 ROOT = Path(__file__).resolve().parents[1]
 _spec = importlib.util.spec_from_file_location("signal_trials", ROOT / "benchmarks" / "signal_trials.py")
@@ -52,7 +52,7 @@ def python(code: str, *args, cwd=None, env=None) -> subprocess.CompletedProcess:
 #: its worker, keeper, the fork server and the runner waiting for ever.
 SIGNAL_IN_SUBMIT = """
 import os, signal, sys, time
-from rippleb.engine import forkserver
+from rippleb.engine.process import forkserver
 real = forkserver.ForkServer.spawn
 def spawn(self, job, *args, **kwargs):
     pid = real(self, job, *args, **kwargs)
@@ -110,7 +110,7 @@ def big_result():
 
 
 def test_a_keeper_ends_its_worker_once_the_runner_stops_listening():
-    from rippleb.engine.keeper import keeper
+    from rippleb.engine.process.keeper import keeper
 
     result_r, result_w = os.pipe()
     ctrl_r, ctrl_w = os.pipe()

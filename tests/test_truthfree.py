@@ -1,4 +1,4 @@
-"""The truth-free scores (rippleb/truthfree.py) on signals whose answer is known."""
+"""The truth-free scores (rippleb/scoring/truthfree.py) on signals whose answer is known."""
 
 import dataclasses
 
@@ -9,10 +9,10 @@ from hypothesis import strategies as st
 from scipy import signal
 
 from rippleb.engine.results import read_rows
-from rippleb.metrics import Truth
-from rippleb.truthfree import (MIN_REST_S, POINTS_PER_REV, TRUTH_FREE_COLUMNS, _segment_spectra, rest_std_nm,
-                               ripple_wg_nm,
-                               strain_delay_ms, truth_free_scores)
+from rippleb.scoring.metrics import Truth
+from rippleb.scoring.truthfree import (MIN_REST_S, POINTS_PER_REV, TRUTH_FREE_COLUMNS, _segment_spectra, rest_std_nm,
+                                       ripple_wg_nm,
+                                       strain_delay_ms, truth_free_scores)
 
 FS = 20_000.0
 CPR = 2500

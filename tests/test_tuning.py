@@ -154,11 +154,16 @@ def test_bad_tune_options_are_one_line_exit_2(args, message):
 
 
 class _Entry:
-    def __init__(self, cls):
+    def __init__(self, cls, name):
         self.cls = cls
+        self.name = name
 
     def load(self):
         return self.cls
+
+    @property
+    def module(self):
+        return self.cls.__module__
 
 
 class _Registry:
@@ -166,7 +171,7 @@ class _Registry:
         self.classes = classes
 
     def get(self, name):
-        return _Entry(self.classes[name])
+        return _Entry(self.classes[name], name)
 
 
 @pytest.mark.parametrize("tunable, message", [

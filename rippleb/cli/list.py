@@ -19,9 +19,10 @@ def add_list(sub) -> None:
                        description="List every method with its origin (builtin, plugin, or broken "
                                    "with its import error) and what it does (its description, else "
                                    "the first line of its class or module docstring), every built-in scenario with whether it is scored and "
-                                   "what it tests (the first sentence of its description), and the "
-                                   "deployment conditions. Plugins are imported in a child "
-                                   "process, each under a timeout.")
+                                   "what it tests (the first sentence of its description), the "
+                                   "deployment conditions, and the strain-gauge layouts with their "
+                                   "gauges, channels, the orders they cancel and their sources. Plugins "
+                                   "are imported in a child process, each under a timeout.")
     p.add_argument("--import-timeout", type=float, default=PLUGIN_IMPORT_TIMEOUT_S, metavar="S",
                    help=f"seconds a plugin may take to import (default {PLUGIN_IMPORT_TIMEOUT_S:g})")
     p.set_defaults(func=cmd_list)
@@ -33,6 +34,7 @@ LIST_WIDTH = 100
 
 def cmd_list(args) -> int:
     """``rippleb list``."""
+    from rippleb.layouts import LAYOUT_NAMES, cancelled_orders, layout
     from rippleb.registry import Registry
     from rippleb.scenario import builtin_scenarios, load_scenario
     from rippleb.simulator.conditions import CONDITIONS
@@ -66,7 +68,18 @@ def cmd_list(args) -> int:
     print("conditions (what happened between calibration and scoring):")
     for name, text in CONDITIONS.items():
         print(_fit(f"  {name:<28} {'':<10} {text}"))
+    print("gauge layouts ([gauges] layout = NAME in a scenario; gauges x amplifier channels):")
+    for name in LAYOUT_NAMES:
+        lay = layout(name)
+        cancelled = cancelled_orders(lay, LISTED_ORDERS)
+        cancels = f"cancels orders {', '.join(map(str, cancelled))}; " if cancelled else ""
+        print(_fit(f"  {name:<28} {f'{lay.gauges} x {lay.amplifiers}':<10} {lay.summary}; {cancels}"
+                   f"{lay.source}"))
     return 0
+
+
+#: The orders of the wave-generator angle ``rippleb list`` says a layout cancels.
+LISTED_ORDERS = (1, 2, 3, 4, 5, 6, 7, 8)
 
 
 #: Words ending in a full stop that do not end a sentence.

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from rippleb.engine.dask_connect import CONNECT_TIMEOUT_S
+from rippleb.engine.dask.connect import CONNECT_TIMEOUT_S
 from rippleb.errors import InputError
 
 
@@ -78,7 +78,7 @@ def executor(args):
     if getattr(args, "log", None) is not None:
         raise InputError("--executor dask/--scheduler do not apply with --log (a recorded log runs "
                          "on the local pool)")
-    from rippleb.engine.dask_executor import DaskExecutor
+    from rippleb.engine.dask.executor import DaskExecutor
 
     timeout = args.connect_timeout
     if not (math.isfinite(timeout) and timeout > 0):

@@ -104,18 +104,22 @@ def _interrupted(args) -> str:
 
 def _what_was_kept(out_dir: Path | None, command: str = "run") -> str:
     """Name what an interrupted run left on disk, and how to finish it."""
+    from rippleb.errors import InputError
+    from rippleb.reading import RESULTS_BYTES, RUN_FILE_BYTES, read_bytes
+
     if out_dir is None or not (out_dir / "run.json").is_file():
         return ""
     results = out_dir / "results.csv"
     try:
-        done = max(0, len(results.read_text().splitlines()) - 1) if results.is_file() else 0
-    except OSError:
+        done = max(0, read_bytes(results, RESULTS_BYTES, "results file", in_run_dir=True).count(b"\n") - 1)
+    except (OSError, InputError):
         done = 0
     kept = (f"{done} finished row(s) are in {results}" if done
             else f"no row had finished; the selection is in {out_dir / 'run.json'}")
     try:  # a sealed run is resumed with its salt
-        salt = " --salt-file FILE" if '"sealed"' in (out_dir / "run.json").read_text(errors="replace") else ""
-    except OSError:
+        run = read_bytes(out_dir / "run.json", RUN_FILE_BYTES, "run file", in_run_dir=True)
+        salt = " --salt-file FILE" if b'"sealed"' in run else ""
+    except (OSError, InputError):
         salt = ""
     return f"; {kept}; finish the run with: rippleb {command} --resume {out_dir}{salt}"
 

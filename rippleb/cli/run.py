@@ -117,23 +117,32 @@ def _record_run(args, provenance: dict, wall_s: float) -> None:
     path = out_dir / "provenance.json"
     provenance.update(jobs=args.jobs, wall_s=wall_s, finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
     if args.resume is not None and path.is_file():
+        from rippleb.reading import RUN_FILE_BYTES, parse_json, read_text
+
         try:
-            first = json.loads(path.read_text())
-        except (OSError, ValueError):
+            first = parse_json(read_text(path, RUN_FILE_BYTES, "run file", in_run_dir=True), path)
+        except (OSError, InputError):
             first = {}
-        first.setdefault("resumes", []).append(provenance["command"])
+        first = first if isinstance(first, dict) else {}
+        first["resumes"] = [*(first.get("resumes") if isinstance(first.get("resumes"), list) else []),
+                            provenance["command"]]
         changes = environment_changes(first, provenance)
         if changes:
             portable = all((p.get("machine") or {}).get("numerics") == "portable" for p in (first, provenance))
-            first.setdefault("environment_changes", []).append(
-                {"command": provenance["command"], "changes": changes, "portable": portable})
-        first["wall_s"] = first.get("wall_s", 0.0) + wall_s
+            earlier = first.get("environment_changes")
+            first["environment_changes"] = [*(earlier if isinstance(earlier, list) else []),
+                                             {"command": provenance["command"], "changes": changes,
+                                              "portable": portable}]
+        first["wall_s"] = (first["wall_s"] if isinstance(first.get("wall_s"), (int, float)) else 0.0) + wall_s
         first["completed"] = provenance["completed"]
         provenance = first
-    try:
-        path.write_text(json.dumps(provenance, indent=1) + "\n")
-    except OSError as exc:
-        print(f"rippleb: warning: cannot record {path}: {exc.strerror or exc}", file=sys.stderr)
+    from rippleb.files import atomic_path
+
+    try:   # replaced, never written through: a link put there meanwhile is replaced, not followed
+        with atomic_path(path) as tmp:
+            tmp.write_text(json.dumps(provenance, indent=1) + "\n")
+    except InputError as exc:
+        print(f"rippleb: warning: cannot record {path}: {exc}", file=sys.stderr)
 
 
 def _run(args, start: float) -> int:
@@ -208,7 +217,7 @@ def _run(args, start: float) -> int:
 def report_nothing_measured(frame) -> int:
     """One stderr line and exit 1 when rows ran but none was measured (every one ``error``,
     ``invalid`` or ``timeout``): the run holds no result to compare; else 0."""
-    from rippleb.scorable import MEASURED
+    from rippleb.scoring.scorable import MEASURED
 
     if not len(frame) or frame["status"].isin(MEASURED).any():
         return 0

@@ -4,8 +4,8 @@ Every method gets the same budget of calibration evaluations, on the ``calibrati
 scenario of the tuning devices only, scored against ``torque_ref``; the record (JSON, one
 entry per method, written as each finishes) says every point tried, its score on each
 device, the best point and whether the rule lets it replace the default. The built-ins'
-record is ``methods/tuning.json`` (docs/tuning.md). Methods run in this process's
-workers, unsandboxed, as ``rippleb check`` runs them: tune only methods you trust.
+record is ``methods/tuning.json`` (docs/tuning.md). Each point runs as a run's rows do, in
+the method's sandboxed worker under the run's default limits (:mod:`rippleb.engine.tuner`).
 """
 
 from __future__ import annotations
@@ -17,6 +17,11 @@ from pathlib import Path
 
 from rippleb.errors import InputError
 from rippleb.tuning import BUDGET, CRITERION, RULE, SEED, SEEDS
+
+#: The largest ``--budget``: 1024 points a method (64 times the protocol's 16), each fitted
+#: and run on every tuning device, is hours of CPU a method; ``--budget 1000000`` was
+#: accepted and drew its Sobol points before anything else (2.4 GB).
+MAX_BUDGET = 1024
 
 
 def add_tune(sub) -> None:
@@ -51,8 +56,9 @@ def cmd_tune(args) -> int:
     from rippleb.version import __version__
 
     seeds = parse_seeds(args.seeds)
-    if args.budget < 1:
-        raise InputError(f"--budget must be at least 1, got {args.budget}")
+    if not 1 <= args.budget <= MAX_BUDGET:
+        raise InputError(f"--budget must be a whole number in 1-{MAX_BUDGET} (the protocol's is {BUDGET}), "
+                         f"got {args.budget}")
     if args.jobs < 1:
         raise InputError(f"--jobs must be at least 1, got {args.jobs}")
     registry = Registry.discover()
@@ -104,16 +110,17 @@ def line(name: str, entry: dict, out: Path | None = None) -> str:
 def parse_seeds(text: str) -> list[int]:
     """``A-B`` or ``A,B,C`` as a list of seeds, checked as a run's seeds are
     (:func:`~rippleb.engine.rows.select_seeds`); anything else is one line naming ``--seeds``."""
-    from rippleb.engine.rows import select_seeds
+    from rippleb.engine.rows import MAX_SEEDS, select_seeds
 
     try:
-        if "-" in text:
-            lo, hi = (int(v) for v in text.split("-"))
-            seeds = list(range(lo, hi + 1))
-        else:
-            seeds = [int(v) for v in text.split(",")]
+        span = [int(v) for v in text.split("-")] if "-" in text else None
+        seeds = [int(v) for v in text.split(",")] if span is None else []
+        lo, hi = span if span is not None else (0, -1)
     except ValueError:
-        raise InputError(f"--seeds {text!r}: expected 'A-B' or 'A,B,C' (non-negative integers)") from None
+        raise InputError(f"--seeds {text[:60]!r}: expected 'A-B' or 'A,B,C' (non-negative integers)") from None
+    if hi - lo >= MAX_SEEDS:   # checked before the list is made
+        raise InputError(f"--seeds {text[:60]!r}: {hi - lo + 1} devices, more than the {MAX_SEEDS} a run may have")
+    seeds = seeds or list(range(lo, hi + 1))
     if not seeds:
         raise InputError(f"--seeds {text!r}: expected at least one seed")
     return select_seeds(seeds, 0)

@@ -55,6 +55,15 @@ class Artefact:
         return data
 
 
+    @classmethod
+    def of_file(cls, path) -> "Artefact":
+        """A file written already (a fitted state the pool received into it), made read-only
+        and hashed as it is now, read in chunks."""
+        os.chmod(path, 0o444)
+        with open(path, "rb") as fh:
+            return cls(str(path), hashlib.file_digest(fh, "sha256").hexdigest())
+
+
 def digest(data: bytes) -> str:
     """SHA-256 of ``data`` as hex."""
     return hashlib.sha256(data).hexdigest()

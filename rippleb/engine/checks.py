@@ -14,14 +14,14 @@ import numpy as np
 
 from rippleb.data import SensorLog
 from rippleb.errors import InputError
-from rippleb.metrics import MAX_DELAY_S
+from rippleb.scoring.metrics import MAX_DELAY_S
 from rippleb.timebase import uniform_rate
 from rippleb.engine.rows import check_trajectory
 
 MIN_FS, MAX_FS = 100.0, 1e6
 MIN_CALIBRATION_S = 1.0
 #: Shortest recording that can be scored [s]: twice the 100 ms of lags ``delay_ms`` searches
-#: (:data:`rippleb.metrics.MAX_DELAY_S`), so that at its largest lag the estimate and the
+#: (:data:`rippleb.scoring.metrics.MAX_DELAY_S`), so that at its largest lag the estimate and the
 #: reference still overlap for as long as they are shifted; 4000 samples at 20 kHz.
 MIN_SCORED_S = 2 * MAX_DELAY_S
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rippleb.simulator.conditions import calibration_condition
-from rippleb.engine.pool import Pool
+from rippleb.engine.process.pool import Pool
 from rippleb.engine.results import ResultsFile
 from rippleb.engine.rows import CALIBRATION, FITTING, SCORED, Case, RowKey, scenario_hash
 
@@ -67,7 +67,7 @@ def run_task(task: RowTask, cache: Path, registry, memo: dict | None = None, ser
         and ``Fit -> fit info``; an entry is used
         only while its file exists (and files are checked by hash when read).
     server
-        The :class:`rippleb.engine.forkserver.ForkServer` that forks the row's jobs (one started
+        The :class:`rippleb.engine.process.forkserver.ForkServer` that forks the row's jobs (one started
         before this process held any truth); None forks them from this process.
 
     Returns

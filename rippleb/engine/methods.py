@@ -72,10 +72,13 @@ def base_name(label: str) -> str:
 
 def probe(registry: Registry, names: list[str], read, timeout: float | None):
     """Run ``read(entry) -> bytes`` for each method of ``names`` in its own isolated child,
-    under ``timeout`` seconds each; return ``({name: bytes}, {name: one-line error})``.
-    The calling process never runs a plugin's code, so one that hangs or exits at import
-    delays only itself."""
-    from rippleb.engine.pool import Pool
+    behind the walls of a method's process (:mod:`rippleb.engine.process.sandbox`), under
+    ``timeout`` seconds each; return ``({name: bytes}, {name: one-line error})``. The calling
+    process never runs a plugin's code, so one that hangs or exits at import delays only
+    itself."""
+    from rippleb.engine.process.isolation import Confinement
+    from rippleb.engine.process.landlock import package_paths
+    from rippleb.engine.process.pool import Pool
 
     def job(entry):
         return lambda: read(entry)
@@ -85,7 +88,8 @@ def probe(registry: Registry, names: list[str], read, timeout: float | None):
     while pending or pool.busy:
         while pending and pool.free:
             name = pending.pop(0)
-            pool.submit(name, job(registry.entries[name]), timeout, confine=())
+            entry = registry.get(name)
+            pool.submit(name, job(entry), timeout, confine=Confinement(readable=package_paths(entry.module)))
         for fin in pool.wait():
             if fin.kind == "done":
                 done[fin.key] = bytes(fin.value)

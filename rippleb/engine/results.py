@@ -29,11 +29,11 @@ from rippleb.simulator.conditions import DEFAULT_CONDITION
 from rippleb import integrity
 from rippleb.errors import InputError, RunWarning  # noqa: F401 - RunWarning: re-exported
 from rippleb.files import atomic_path, open_appending
-from rippleb.metrics import METRIC_COLUMNS
-from rippleb.printable import escaped
-from rippleb.scorable import MEASURED, NO_REFERENCE  # noqa: F401 - MEASURED re-exported
-from rippleb.rebuilt import REFERENCE_COLUMNS
-from rippleb.truthfree import TRUTH_FREE_COLUMNS
+from rippleb.scoring.metrics import LATER_COLUMNS, METRIC_COLUMNS
+from rippleb.printable import csv_read, csv_text, escaped
+from rippleb.scoring.scorable import MEASURED, NO_REFERENCE  # noqa: F401 - MEASURED re-exported
+from rippleb.scoring.rebuilt import REFERENCE_COLUMNS
+from rippleb.scoring.truthfree import TRUTH_FREE_COLUMNS
 
 KEY_COLUMNS = ("method", "scenario", "condition", "seed")
 # The truth-free and reference columns came later: a results file without them still reads (as n/a).
@@ -201,12 +201,26 @@ class ResultsFile:
                              key=lambda item: item[0])
 
     def _line(self, row: dict) -> str:
-        buffer = io.StringIO()
-        csv.writer(buffer, lineterminator="\n").writerow([_cell(row.get(name)) for name in self._header])
-        return buffer.getvalue()
+        return _csv_line(self._header, [_cell(row.get(name)) for name in self._header])
 
 
 _cell = integrity.cell_text
+
+
+def is_text_column(name: str) -> bool:
+    """Whether a column of a results file holds text (a name, a status, a message), not a
+    number: its cells are written through :func:`rippleb.printable.csv_text`, so that a
+    spreadsheet runs none of them as a formula (docs/robustness.md, section 11)."""
+    return name not in NUMERIC_COLUMNS and name != "seed" and name not in swept_columns([name])
+
+
+def _csv_line(header: list[str], cells: list[str]) -> str:
+    """One line of a results file: ``cells`` (as :func:`_cell` or a reader gave them) under
+    ``header``, every text cell neutralised for spreadsheets, numbers as they are."""
+    buffer = io.StringIO()
+    csv.writer(buffer, lineterminator="\n").writerow(
+        [csv_text(cell) if cell and is_text_column(name) else cell for name, cell in zip(header, cells)])
+    return buffer.getvalue()
 
 
 def say_other_versions(rows: list[dict], out_dir) -> None:
@@ -237,7 +251,7 @@ def read_rows(path: Path) -> list[dict]:
     """
     path = Path(path)
     try:
-        text = path.read_bytes().decode("utf-8")
+        text = _read_text(path)
         # rippleb ends every line it writes; a last line without its end is an append cut short
         unfinished = "\n" in text and not text.endswith("\n")
         if unfinished:
@@ -248,7 +262,8 @@ def read_rows(path: Path) -> list[dict]:
     if not lines:
         raise InputError(f"{path}: empty file, not a rippleb results file")
     header, body = lines[0], lines[1:]
-    required = ("method", "scenario", "seed", "status") + METRIC_COLUMNS
+    required = ("method", "scenario", "seed", "status") + tuple(c for c in METRIC_COLUMNS
+                                                                if c not in LATER_COLUMNS)
     missing = [c for c in required if c not in header]
     if missing:
         raise InputError(f"{path}: not a rippleb results file (missing column(s) {', '.join(missing)})")
@@ -271,25 +286,35 @@ def read_rows(path: Path) -> list[dict]:
     return rows
 
 
+def _read_text(path: Path) -> str:
+    """A run directory's results file, bounded and never through a link (:mod:`rippleb.reading`)."""
+    from rippleb.reading import RESULTS_BYTES, read_text
+
+    return read_text(path, RESULTS_BYTES, "results file", in_run_dir=True)
+
+
 def copy_rows(source: Path, target: Path, keys: set) -> None:
-    """Copy ``source`` to ``target`` byte for byte, keeping the header and only the lines
-    whose row key is in ``keys`` (the rows a reader verified); a plain copy when all are."""
-    text = Path(source).read_bytes().decode("utf-8")
+    """Copy ``source`` to ``target``, keeping the header and only the lines whose row key is
+    in ``keys`` (the rows a reader verified). Each number keeps the exact text it has (a
+    re-printed float could change its last digit); each text cell is written as
+    :class:`ResultsFile` writes it, so a file from an older rippleb, or edited by hand,
+    loses its formulas too. A line rippleb wrote is copied byte for byte."""
+    text = _read_text(Path(source))
     lines = [line + "\n" for line in text.split("\n")[:-1]]   # rippleb ends every line with "\n"
     header = next(csv.reader([lines[0]]))
-    kept = [lines[0]]
+    kept = [_csv_line(header, header)]
     for line in lines[1:]:
         cells = next(csv.reader([line]), [])
         row, problem = _check_row(header, cells) if cells else ({}, "empty")
         if problem is None and row_key(row) in keys:
-            kept.append(line)
+            kept.append(_csv_line(header, [csv_read(c) if is_text_column(n) else c for n, c in zip(header, cells)]))
     Path(target).write_text("".join(kept), encoding="utf-8")
 
 
 def _check_row(header: list[str], cells: list[str]) -> tuple[dict, str | None]:
     if len(cells) != len(header):
         return {}, f"has {len(cells)} of {len(header)} fields (truncated?)"
-    row: dict = dict(zip(header, cells))
+    row: dict = {name: csv_read(cell) if is_text_column(name) else cell for name, cell in zip(header, cells)}
     row.setdefault("condition", DEFAULT_CONDITION)
     for name in ("method", "scenario", "condition"):
         if not row[name]:
@@ -319,3 +344,28 @@ def _check_row(header: list[str], cells: list[str]) -> tuple[dict, str | None]:
     if row["status"] == "ok" and not any(math.isfinite(row.get(c, math.nan)) for c in SCORE_COLUMNS):
         return row, "is 'ok' without an RMS error or a truth-free score"
     return row, None
+
+
+def warn_native_numerics() -> None:
+    """One line when this process cannot give rows that re-run to the last bit elsewhere."""
+    from rippleb import numerics
+
+    state = numerics.state()
+    if state != numerics.PORTABLE:
+        why = (f"{numerics.NATIVE_SWITCH} is set" if numerics.native_requested()
+               else "numpy was imported before rippleb")
+        warnings.warn(RunWarning(f"the rows run the host's own numeric paths ({state}; {why}): "
+                                 "they may differ in their last bits from the same rows on another "
+                                 "CPU (docs/reproducibility.md)"), stacklevel=3)
+
+
+def warn_native_rows(rows: list[dict]) -> None:
+    """One line when rows that ran elsewhere (Dask workers) used their host's own paths."""
+    from rippleb import numerics
+
+    native = [row["numerics"] for row in rows if row.get("numerics", numerics.PORTABLE) != numerics.PORTABLE]
+    if native:
+        warnings.warn(RunWarning(f"{len(native)} rows ran on workers with their host's own numeric "
+                                 f"paths ({native[0]}): start 'dask worker' with the variables of "
+                                 "docs/scale.md so that they re-run to the last bit elsewhere"),
+                      stacklevel=3)

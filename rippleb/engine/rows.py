@@ -34,6 +34,20 @@ SCORED, FITTING = "scored", "calibration"
 #: (10 000 x 8 scenarios x 10 methods rows). A larger number is a typo (--seeds 100000
 #: for --seeds 10), which would otherwise plan millions of rows and list every seed in run.json.
 MAX_SEEDS = 10_000
+#: The most rows one run or sweep may plan, checked before anything is planned: the default
+#: selection at :data:`MAX_SEEDS` is 1.12 million rows (14 built-ins x 8 scenarios, months of
+#: CPU); the published comparison is 11 200. Its plan holds about 1 GB and takes under a
+#: minute; more was a typo (a grid of 1e9 variants, a sweep of 40 000 points) expanded until
+#: memory ran out.
+MAX_ROWS = 2_000_000
+
+
+def check_rows(count: int, what: str) -> None:
+    """Refuse, before planning, a selection of more than :data:`MAX_ROWS` rows; ``what``
+    says how the count was made (``2 methods x 8 scenarios x ...``)."""
+    if count > MAX_ROWS:
+        raise InputError(f"{what} is {count:.4g} rows, more than the {MAX_ROWS} one run may have "
+                         f"(docs/robustness.md, section 11); split it into runs")
 
 
 @dataclass(frozen=True, order=True)

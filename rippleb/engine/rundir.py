@@ -21,6 +21,7 @@ from pathlib import Path
 from rippleb.simulator.conditions import DEFAULT_CONDITION
 from rippleb import integrity
 from rippleb.errors import InputError
+from rippleb import files
 from rippleb.files import atomic_path
 from rippleb.engine.results import RunWarning
 from rippleb.engine.rows import MAX_SEEDS
@@ -67,15 +68,8 @@ OWN_ENTRIES = (".lock", "run.json", "results.csv", integrity.LEDGER, "provenance
 
 def refuse_links(out: Path) -> None:
     """Refuse a run directory where a file rippleb writes (:data:`OWN_ENTRIES`, or a log
-    in ``logs/``) is a symbolic link: rippleb makes none, and writing through one would
-    truncate or fill the file it names, anywhere the user may write (issue 34)."""
-    logs = out / "logs"
-    found = [out / name for name in OWN_ENTRIES if (out / name).is_symlink()]
-    if not found and logs.is_dir():
-        found = [entry for entry in sorted(logs.iterdir()) if entry.is_symlink()][:1]
-    if found:
-        raise InputError(f"{found[0]}: a symbolic link, which rippleb never makes in a run directory; "
-                         f"rippleb does not write through it: remove it, or choose another --out")
+    in ``logs/``) is a symbolic link (:func:`rippleb.files.refuse_links`)."""
+    files.refuse_links(out, OWN_ENTRIES, also_in="logs")
 
 
 @contextlib.contextmanager
@@ -122,13 +116,13 @@ def _check_resume(out: Path, config: dict) -> None:
 def read_config(out) -> dict:
     """The selection saved by a run in ``out/run.json`` (for ``--resume``), checked field
     by field: a file edited by hand or cut short is one line naming the field."""
+    from rippleb.reading import RUN_FILE_BYTES, parse_json, read_text
+
     path = Path(out) / "run.json"
-    if not path.is_file():
-        raise InputError(f"{Path(out)}: nothing to resume (no run.json: no run was started there)")
     try:
-        config = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise InputError(f"{path}: cannot resume this run: {getattr(exc, 'strerror', None) or exc}") from None
+        config = parse_json(read_text(path, RUN_FILE_BYTES, "run file", in_run_dir=True), path)
+    except FileNotFoundError:
+        raise InputError(f"{Path(out)}: nothing to resume (no run.json: no run was started there)") from None
     if not isinstance(config, dict) or not isinstance(config.get("methods"), list):
         raise InputError(f"{path}: not a rippleb run file")
     if "log" in config:

@@ -1,7 +1,7 @@
 """The causal streaming runner: every method x scenario x condition x seed, one isolated process each.
 
 A run has three kinds of jobs (:mod:`rippleb.engine.jobs`), each in its own isolated child of
-:class:`rippleb.engine.pool.Pool`:
+:class:`rippleb.engine.process.pool.Pool`:
 
 * a *simulation* per (scenario content, condition, seed), plus the ``calibration``
   scenario per seed, simulated under ``same-session`` (it is the device's first
@@ -27,30 +27,32 @@ from __future__ import annotations
 
 import contextlib
 import datetime as _dt
+import functools
 import tempfile
 import time
-import warnings
 from pathlib import Path
 
 from rippleb import interrupts
-from rippleb.engine import isolation
+from rippleb.engine.process import isolation
 from rippleb.engine import jobs as job_fns
-from rippleb import numerics
-from rippleb.engine import sandbox, sealing
+from rippleb.engine.process import sandbox
+from rippleb.engine import sealing
 from rippleb.engine.cache import digest, log_bytes
 from rippleb.engine.checks import (check_calibration, check_options, check_recording, check_reference, check_scenario,
                                    check_scored_length, check_strain_scale)
 from rippleb.simulator.conditions import DEFAULT_CONDITION, calibration_condition
 from rippleb.data import SensorLog
 from rippleb.errors import InputError
-from rippleb.engine.forkserver import ForkServer
-from rippleb.metrics import Truth, tick_stats
-from rippleb.engine.pool import Pool
+from rippleb.engine.process.forkserver import ForkServer
+from rippleb.scoring.metrics import Truth
+from rippleb.scoring.row import score_row
+from rippleb.engine.process.pool import Pool
 from rippleb.registry import Registry
 from rippleb.engine.executors import row_tasks
 from rippleb.engine.methods import base_name, resolve_methods
-from rippleb.engine.results import MEASURED, ResultsFile, RunWarning, row_key, say_other_versions
-from rippleb.engine.rows import (CALIBRATION, FITTING, MAX_SEEDS, SCORED, Case, RowKey, scenario_hash,
+from rippleb.engine.results import (MEASURED, ResultsFile, RunWarning, row_key, say_other_versions,
+                                    warn_native_numerics, warn_native_rows)
+from rippleb.engine.rows import (CALIBRATION, FITTING, MAX_SEEDS, SCORED, Case, RowKey, check_rows, scenario_hash,
                                  select_conditions, select_scenarios, select_seeds, split_names)
 from rippleb.engine.rundir import log_dir, read_config, run_dir
 from rippleb.engine.scheduler import Plan, State, prepare_cases, progress_bar, record, say_retried, schedule
@@ -102,7 +104,7 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, s
         Called once the run directory is checked and locked, before any job starts.
     executor
         None for the local forked pool, or an object with ``run(tasks, record)`` that runs
-        whole rows elsewhere (:class:`rippleb.engine.dask_executor.DaskExecutor`).
+        whole rows elsewhere (:class:`rippleb.engine.dask.executor.DaskExecutor`).
     sealed
         A new sealed run (:mod:`rippleb.engine.sealing`): the path of a new file, outside ``out``,
         that the secret salt is written to when the run ends; the devices and the noise are
@@ -130,6 +132,9 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, s
         check_scenario(scenario)
     condition_list = select_conditions(conditions)
     seed_list = select_seeds(seeds, seed_start)
+    check_rows(len(names) * len(scenario_objs) * len(condition_list) * len(seed_list),
+               f"{len(names)} methods x {len(scenario_objs)} scenarios x {len(condition_list)} conditions x "
+               f"{len(seed_list)} seeds")
     calibration = load_scenario(CALIBRATION)
     config = {"methods": names, "conditions": condition_list, "seeds": seed_list,
               "scenarios": [str(Path(s).resolve()) if s.endswith(".toml") else s for s in
@@ -153,16 +158,21 @@ def run_resolved(registry: Registry, names: list[str], entries: list[tuple], con
     never share a row; their scenario content (hashed into every cache file name)
     differs. The options are those of :func:`run`; ``config`` is saved in ``run.json``.
     """
-    _warn_native_numerics()
+    warn_native_numerics()
     plan = Plan(calibration_label=CALIBRATION)
+    # each content hash once, not per seed: hashing a scenario takes milliseconds, and a plan
+    # at MAX_SEEDS hashed 160 000 of them (over 10 minutes) before it started
+    hashed: dict[int, str] = {}
+    entries = [(scenario, calibration, extra, *(hashed.setdefault(id(s), scenario_hash(s))
+                                                for s in (scenario, calibration)))
+               for scenario, calibration, extra in entries]
     for seed in seeds:
-        for scenario, calibration, extra in entries:
-            content = scenario_hash(scenario)
+        interrupts.check_interrupted()   # a plan of many rows takes seconds: Ctrl-C stops it
+        for scenario, calibration, extra, content, cal_content in entries:
             for condition in conditions:
                 # the device's first session; under a condition of the joint itself
                 # (`realistic`) that session has the joint's physics too
-                cal_case = Case(CALIBRATION, scenario_hash(calibration), calibration_condition(condition),
-                                seed, FITTING)
+                cal_case = Case(CALIBRATION, cal_content, calibration_condition(condition), seed, FITTING)
                 plan.add_sim(calibration, cal_case)
                 case = Case(scenario.name, content, condition, seed, SCORED)
                 plan.add_sim(scenario, case)
@@ -177,27 +187,6 @@ def run_resolved(registry: Registry, names: list[str], entries: list[tuple], con
     return _execute(registry, plan, out=out, jobs=jobs, timeout=timeout, memory_mb=memory_mb,
                     resume=resume, progress=progress, config=config, on_start=on_start, executor=executor,
                     sealed=sealed, salt_file=salt_file)
-
-
-def _warn_native_numerics() -> None:
-    """One line when this process cannot give rows that re-run to the last bit elsewhere."""
-    state = numerics.state()
-    if state != numerics.PORTABLE:
-        why = (f"{numerics.NATIVE_SWITCH} is set" if numerics.native_requested()
-               else "numpy was imported before rippleb")
-        warnings.warn(RunWarning(f"the rows run the host's own numeric paths ({state}; {why}): "
-                                 "they may differ in their last bits from the same rows on another "
-                                 "CPU (docs/reproducibility.md)"), stacklevel=3)
-
-
-def _warn_native_rows(rows: list[dict]) -> None:
-    """One line when rows that ran elsewhere (Dask workers) used their host's own paths."""
-    native = [row["numerics"] for row in rows if row.get("numerics", numerics.PORTABLE) != numerics.PORTABLE]
-    if native:
-        warnings.warn(RunWarning(f"{len(native)} rows ran on workers with their host's own numeric "
-                                 f"paths ({native[0]}): start 'dask worker' with the variables of "
-                                 "docs/scale.md so that they re-run to the last bit elsewhere"),
-                      stacklevel=3)
 
 
 def run_log(log, calibration=None, methods=None, *, jobs: int = 1, out=None,
@@ -220,40 +209,44 @@ def run_log(log, calibration=None, methods=None, *, jobs: int = 1, out=None,
     from rippleb.data import read_log
 
     check_options(jobs=jobs, timeout=timeout, memory_mb=memory_mb)
-    log_name = _log_label(log, "log")
-    log = log if isinstance(log, SensorLog) else read_log(log, joint=joint, resample=resample)
-    check_recording(log, log_name)
-    if calibration is None:
-        if log.torque_ref is None:
-            raise InputError(f"{log_name}: no torque_ref column, so methods cannot be calibrated on it; "
-                             "pass --calibration FILE")
-        cal, label = log, "self"
-    else:
-        label = _log_label(calibration, "calibration")
-        cal = calibration if isinstance(calibration, SensorLog) else read_log(
-            calibration, spec=log.spec, joint=joint, resample=resample)
-        if cal.torque_ref is None:
-            raise InputError(f"{label}: a calibration log needs a torque_ref column")
-        check_recording(cal, label)
-        check_calibration(cal, label, log)
-    check_scored_length(log, log_name)
-    check_reference(cal, log_name if calibration is None else label)
-    check_strain_scale(log, cal, log_name)
-    truth = Truth.from_recording(log)
     registry = Registry.discover()
     names = resolve_methods(registry, methods)
-    scenario = f"log:{log_name}"
-    case = Case(scenario, digest(log_bytes(log)), DEFAULT_CONDITION, 0, SCORED)
-    cal_case = Case(CALIBRATION, digest(log_bytes(cal)), DEFAULT_CONDITION, 0, FITTING)
-    plan = Plan(calibration_label=label)
-    plan.ready = {case: (log, truth), cal_case: (cal, None)}
-    for method in names:
-        plan.add_row(RowKey(method, scenario, DEFAULT_CONDITION, 0), case, cal_case)
-    return _execute(registry, plan, out=out, jobs=jobs, timeout=timeout, memory_mb=memory_mb,
-                    resume=False, progress=progress, on_start=on_start,
-                    config={"methods": names, "log": log_name, "conditions": [DEFAULT_CONDITION],
-                            "joint": {"gear_ratio": log.spec.gear_ratio, "counts_per_rev": log.spec.counts_per_rev,
-                                      "reference_kind": truth.reference_kind}})
+    # The fork server before the logs are read: every job is forked from it, and the
+    # recording's reference torque, which the rows are scored against, must be in none.
+    with isolation.undumpable(), fork_server(registry) as server:
+        log_name = _log_label(log, "log")
+        log = log if isinstance(log, SensorLog) else read_log(log, joint=joint, resample=resample)
+        check_recording(log, log_name)
+        if calibration is None:
+            if log.torque_ref is None:
+                raise InputError(f"{log_name}: no torque_ref column, so methods cannot be calibrated on it; "
+                                 "pass --calibration FILE")
+            cal, label = log, "self"
+        else:
+            label = _log_label(calibration, "calibration")
+            cal = calibration if isinstance(calibration, SensorLog) else read_log(
+                calibration, spec=log.spec, joint=joint, resample=resample)
+            if cal.torque_ref is None:
+                raise InputError(f"{label}: a calibration log needs a torque_ref column")
+            check_recording(cal, label)
+            check_calibration(cal, label, log)
+        check_scored_length(log, log_name)
+        check_reference(cal, log_name if calibration is None else label)
+        check_strain_scale(log, cal, log_name)
+        truth = Truth.from_recording(log)
+        scenario = f"log:{log_name}"
+        case = Case(scenario, digest(log_bytes(log)), DEFAULT_CONDITION, 0, SCORED)
+        cal_case = Case(CALIBRATION, digest(log_bytes(cal)), DEFAULT_CONDITION, 0, FITTING)
+        plan = Plan(calibration_label=label)
+        plan.ready = {case: (log, truth), cal_case: (cal, None)}
+        for method in names:
+            plan.add_row(RowKey(method, scenario, DEFAULT_CONDITION, 0), case, cal_case)
+        return _execute(registry, plan, out=out, jobs=jobs, timeout=timeout, memory_mb=memory_mb,
+                        resume=False, progress=progress, on_start=on_start, server=server,
+                        config={"methods": names, "log": log_name, "conditions": [DEFAULT_CONDITION],
+                                "joint": {"gear_ratio": log.spec.gear_ratio,
+                                          "counts_per_rev": log.spec.counts_per_rev,
+                                          "reference_kind": truth.reference_kind}})
 
 
 def _log_label(log, default: str) -> str:
@@ -262,8 +255,29 @@ def _log_label(log, default: str) -> str:
     return Path(source).name if source else default
 
 
+def run_plan(registry, plan: Plan, *, jobs: int = 1, timeout: float | None = DEFAULT_TIMEOUT_S,
+             memory_mb: float | None = DEFAULT_MEMORY_MB, progress: bool | None = False, on_record=None,
+             server=None, estimates: dict | None = None):
+    """Run a plan made elsewhere (the tuner's points, the report's figures) exactly as a run's
+    rows run, in memory (no run directory); ``on_record(row)`` is called as each row is
+    recorded, and ``estimates``, if given, receives each ``ok`` row's estimate by its key.
+    ``server``: a fork server started before the plan's given logs were read
+    (:func:`fork_server`), else one is started now. Returns the rows as :func:`run` does."""
+    return _execute(registry, plan, out=None, jobs=jobs, timeout=timeout, memory_mb=memory_mb, resume=False,
+                    progress=progress, config={}, on_record=on_record, server=server, estimates=estimates)
+
+
+def fork_server(registry, plan: Plan | None = None) -> ForkServer:
+    """The process every job of a run is forked from (:mod:`rippleb.engine.process.forkserver`),
+    started now: before anything this process holds a truth of (a simulation, a recorded
+    log's reference), so that no job's memory holds one. It loads the simulator and the
+    built-in methods (those of ``plan``, else all), never a plugin."""
+    return ForkServer.start(registry, preload=functools.partial(_warm, registry, plan))
+
+
 def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, progress, config,
-             on_start=None, executor=None, sealed=None, salt_file=None):
+             on_start=None, executor=None, sealed=None, salt_file=None, on_record=None, server=None,
+             estimates=None):
     # Signals are held from here on and raised only where stopping leaves nothing half
     # done (rippleb.interrupts): the loops between jobs and the waits, which poll. So an
     # interrupt never orphans a job, a half-claimed run directory or a temporary file.
@@ -275,10 +289,12 @@ def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, pro
         if executor is None:   # a Dask worker's log says what its own kernel grants
             sandbox.say_missing(sealed=sealed is not None or salt_file is not None)
         # The local jobs are forked by a server forked now, before the first simulation, so
-        # no job's memory ever holds a truth (rippleb.engine.forkserver). Another executor runs its
+        # no job's memory ever holds a truth (rippleb.engine.process.forkserver). Another executor runs its
         # rows elsewhere.
-        server = (ForkServer.start(registry, preload=lambda: _warm(registry, plan)) if executor is None
-                  else contextlib.nullcontext())
+        if executor is not None:
+            server = contextlib.nullcontext()
+        elif server is None:
+            server = fork_server(registry, plan)
         seal, started = None, False
         try:
             with server:
@@ -293,7 +309,7 @@ def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, pro
                     try:
                         _run_rows(registry, plan, results, out_dir, resume=resume, jobs=jobs, timeout=timeout,
                                   memory_mb=memory_mb, progress=progress, server=server, executor=executor,
-                                  seal=seal)
+                                  seal=seal, on_record=on_record, estimates=estimates)
                     finally:  # finished or interrupted: the file in key order, from the rows in memory
                         if results.rows:
                             results.flush()
@@ -303,7 +319,7 @@ def _execute(registry, plan: Plan, *, out, jobs, timeout, memory_mb, resume, pro
 
 
 def _run_rows(registry, plan: Plan, results: ResultsFile, out_dir, *, resume, jobs, timeout, memory_mb,
-              progress, server, executor, seal) -> None:
+              progress, server, executor, seal, on_record=None, estimates=None) -> None:
     """Run the rows of ``plan`` not yet in ``results`` and record each as it ends."""
     if resume:
         say_retried(results.drop_environmental(), out_dir)
@@ -319,7 +335,8 @@ def _run_rows(registry, plan: Plan, results: ResultsFile, out_dir, *, resume, jo
     with tempfile.TemporaryDirectory(prefix="rippleb-cache-") as cache, \
             tempfile.TemporaryDirectory(prefix="rippleb-scratch-") as scratch:
         state = State(plan, registry, results, Path(cache), log_dir(out_dir), timeout,
-                      time.strftime("%Y%m%dT%H%M%S"), rows, seal=seal, scratch=Path(scratch))
+                      time.strftime("%Y%m%dT%H%M%S"), rows, seal=seal, scratch=Path(scratch), on_record=on_record,
+                      estimates=estimates)
         with progress_bar(len(rows), progress) as bar:
             prepare_cases(state)
             interrupts.check_interrupted()
@@ -327,7 +344,7 @@ def _run_rows(registry, plan: Plan, results: ResultsFile, out_dir, *, resume, jo
                 schedule(Pool(int(jobs), memory_mb, server=server), state, bar)
             else:  # whole rows run elsewhere; this process only records them
                 executor.run(row_tasks(state, memory_mb), lambda key, fields: record(state, key, bar, **fields))
-                _warn_native_rows(results.rows)
+                warn_native_rows(results.rows)
 
 
 def _warm_simulator(plan: Plan) -> None:
@@ -339,12 +356,16 @@ def _warm_simulator(plan: Plan) -> None:
         robot.load_model(scenario.robot)
 
 
-def _warm(registry, plan: Plan) -> None:
+def _warm(registry, plan: Plan | None) -> None:
     """Load in the fork server what the jobs of ``plan`` would each load again: the
-    simulator with the arm models of its scenarios, and its built-in methods with their
-    compiled kernels. Plugins are not imported here: only workers run plugin code."""
+    simulator with the arm models of its scenarios, and its built-in methods (every one
+    without a plan) with their compiled kernels. Plugins are not imported here: only
+    workers run plugin code."""
     from rippleb.simulator import robot, simulation  # noqa: F401 - the joint's kernels with it
 
+    if plan is None:
+        registry.load_builtins()
+        return
     for scenario, _ in plan.sims.values():
         robot.load_model(scenario.robot)
     registry.load_builtins({base_name(key.method) for key in plan.rows})
@@ -373,7 +394,5 @@ def evaluate(cls, calibration: SensorLog, evaluation: SensorLog, truth: Truth, p
     result = job_fns.run_row(getattr(cls, "name", "method"), params, calibration, evaluation, _One())
     fields = result["info"]
     if fields["status"] == "ok":
-        fields.update(job_fns.score_or_invalid(result["estimate"], truth))
-    if fields["status"] in MEASURED:
-        fields.update(tick_stats(result["ticks"], len(evaluation)))
+        fields.update(score_row(result, truth, len(evaluation), len(result["ticks"])))
     return fields

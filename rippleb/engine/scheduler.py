@@ -8,23 +8,24 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import math
-import signal
 import sys
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from rippleb.engine import isolation, jobs as job_fns
+from rippleb.engine.process import isolation
+from rippleb.engine.process.landlock import own_package
+from rippleb.engine import jobs as job_fns
 from rippleb.interrupts import check_interrupted
 from rippleb.engine.cache import Artefact, TamperedError, digest, load_log, log_bytes, store, unpack
 from rippleb.data import SensorLog
-from rippleb.metrics import tick_stats
-from rippleb.engine.pool import Pool
+from rippleb.scoring.row import score_row
+from rippleb.engine.process.pool import Pool
 from rippleb.registry import Registry, one_line
 from rippleb.variants import split_label
-from rippleb.engine.results import ENVIRONMENT, MEASURED, STATUSES, ResultsFile, RunWarning, system_info
+from rippleb.engine.results import ENVIRONMENT, ResultsFile, RunWarning, system_info
 from rippleb.engine.rows import SCORED, Case, RowKey
+from rippleb.engine.outcomes import environment_first, row_fields, why
 from rippleb.engine.sealing import SEALED_COLUMN
 
 
@@ -77,6 +78,8 @@ class State:
     invalid: dict = field(default_factory=dict)     # Case -> why its simulated log is not physical
     seal: object = None                              # a sealed run's rippleb.engine.sealing.Seal, else None
     scratch: Path | None = None                      # where methods' jobs get their scratch directories
+    on_record: object = None                         # called with each row as it is recorded, or None
+    estimates: dict | None = None                    # RowKey -> estimate of each ok row, when asked for
 
 
 def say_retried(dropped: list[dict], out_dir) -> None:
@@ -151,7 +154,7 @@ def _start_next(pool: Pool, state: State, bar) -> bool:
         failed = [state.sims.get(_sim_key(c), "") for c in (case, cal_case)]
         failed = [f for f in failed if f.startswith("failed")]
         if failed:
-            _record(state, key, bar, status="error", message=_environment_first(f"simulation {failed[0]}"))
+            _record(state, key, bar, status="error", message=environment_first(f"simulation {failed[0]}"))
             return True
         if not all(c in state.artefacts for c in (case, cal_case)):
             continue
@@ -163,13 +166,14 @@ def _start_next(pool: Pool, state: State, bar) -> bool:
         if state.fits[fit] == "pending":
             state.fits[fit] = "running"
             pool.submit(fit, _fit_job(fit, state), state.timeout, _output(state, f"fit--{key.method}--{key.seed}"),
-                        confine=_confined(state))
+                        confine=_confined(state, key.method), max_bytes=_state_bytes(pool),
+                        sink=str(state.cache / f"fit-{digest(repr(fit).encode())[:32]}.pkl"))
             return True
         if state.fits[fit] == "running":
             continue
         state.pending.remove(key)
         if state.fits[fit]["status"] != "ok":
-            _record(state, key, bar, **_row_fields(state.fits[fit]))
+            _record(state, key, bar, **row_fields(state.fits[fit]))
             return True
         try:
             evaluation = _evaluation_log(state, case)
@@ -179,7 +183,7 @@ def _start_next(pool: Pool, state: State, bar) -> bool:
         n_samples, _ = state.lengths[case]
         pool.submit(key, _row_job(key, state, state.fits[fit], evaluation), state.timeout,
                     _output(state, f"{key.method}--{key.scenario}--{key.condition}--{key.seed}"),
-                    max_bytes=24 * n_samples + 2**20, confine=_confined(state))
+                    max_bytes=24 * n_samples + 2**20, confine=_confined(state, key.method))
         return True
     for sim, st in state.sims.items():
         if st == "pending":
@@ -191,10 +195,18 @@ def _start_next(pool: Pool, state: State, bar) -> bool:
     return False
 
 
-def _confined(state: State) -> isolation.Confinement:
-    """A method's worker: the run directory and the cache read-only, a sealed run's salt files hidden."""
+def _state_bytes(pool: Pool) -> int | None:
+    """The most a fitted state may hold: the memory a job may use (it is counted against the
+    limit where it is made, and where each row loads it)."""
+    return int(pool.memory_mb * 2**20) + 2**20 if pool.memory_mb else None
+
+
+def _confined(state: State, method: str) -> isolation.Confinement:
+    """A method's worker: the run directory and the cache read-only, a sealed run's salt files
+    hidden, its own package readable beside the libraries (the rest of the disk is not)."""
     return isolation.Confinement.of([state.results.path and state.results.path.parent, state.cache],
-                                    state.seal.files() if state.seal else (), state.scratch)
+                                    state.seal.files() if state.seal else (), state.scratch,
+                                    own_package(state.registry, method))
 
 
 def _output(state: State, stem: str) -> str | None:
@@ -225,7 +237,7 @@ def _submit_sim(pool: Pool, state: State, sim: tuple, job: job_fns.Job) -> None:
 
 def _finish_sim(fin, state: State) -> None:
     if fin.kind != "done":
-        state.sims[fin.key] = f"failed: {_why(fin, state)}"
+        state.sims[fin.key] = f"failed: {why(fin, state.timeout)}"
         return
     arrays, info = unpack(fin.value)
     for role, ref in info["artefacts"].items():
@@ -255,26 +267,29 @@ def _fit_job(fit: Fit, state: State) -> job_fns.Job:
 
 
 def _fit_outcome(fin, state: State) -> dict:
+    """What a fit left: its info, with ``fit_s`` as its keeper measured it outside the
+    method's process, and the artefact of its fitted state (received into the cache by the
+    pool: the fit's worker cannot write there, and the runner never holds the state)."""
     if fin.kind == "done":
         try:
-            arrays, info = unpack(fin.value)
-            if "fitted" in arrays:  # stored here: the fit's worker cannot write the cache
-                path = state.cache / f"fit-{digest(repr(fin.key).encode())[:32]}.pkl"
-                artefact = store(path, arrays["fitted"].tobytes())
-                info["fitted"] = {"path": artefact.path, "sha256": artefact.sha256}
-            return info
+            info, size = job_fns.read_fit(fin.value)
         except Exception as exc:  # noqa: BLE001 - whatever a fit sends, it is one status line
             return {"status": "error", "message": f"fit sent an unreadable result ({type(exc).__name__})"}
+        info.pop("fit_s", None)   # its own clock's: the time measured outside replaces it
+        if fin.method_s is not None:
+            info["fit_s"] = fin.method_s
+        if size:
+            artefact = Artefact.of_file(fin.value)
+            info["fitted"] = {"path": artefact.path, "sha256": artefact.sha256}
+        else:
+            Path(fin.value).unlink(missing_ok=True)
+        return info
     if fin.kind == "timeout":
         return {"status": "timeout", "message": f"fit killed after {state.timeout:g} s"}
-    return {"status": "error", "message": _environment_first(f"fit: {_why(fin, state)}")}
-
-
-def _environment_first(message: str) -> str:
-    """Move an environmental marker to the front, where ``--resume`` looks for it."""
-    if ENVIRONMENT in message and not message.startswith(ENVIRONMENT):
-        return ENVIRONMENT + message.replace(ENVIRONMENT, "", 1)
-    return message
+    if fin.kind == "oversized":
+        return {"status": "error", "message": f"fit: its fitted state ({fin.value} bytes) is larger than the "
+                                              f"memory a job may use (--memory-limit)"}
+    return {"status": "error", "message": environment_first(f"fit: {why(fin, state.timeout)}")}
 
 
 def _evaluation_log(state: State, case: Case) -> SensorLog:
@@ -300,48 +315,35 @@ def _row_job(key: RowKey, state: State, fit: dict, evaluation: SensorLog) -> job
 
 def _finish_row(fin, state: State, bar) -> None:
     key = fin.key
-    case = state.plan.rows[key][0]
+    case, cal_case = state.plan.rows[key]
     if fin.kind == "done":
-        fields = _score_row(fin.value, state, case)
+        fields = _score_row(fin.value, state, case, fin.method_s, key)
     elif fin.kind == "timeout":
         fields = {"status": "timeout", "message": f"killed after {state.timeout:g} s"}
     else:
-        fields = {"status": "error", "message": _why(fin, state)}
+        fields = {"status": "error", "message": why(fin, state.timeout)}
+    # Its fit's time as the fit's keeper measured it; a row that fitted itself (a method
+    # that cannot be pickled) has none apart from its own, which its clock could fake.
+    fields.pop("fit_s", None)
+    fit = state.fits.get(Fit(key.method, cal_case))
+    if isinstance(fit, dict) and isinstance(fit.get("fitted"), dict) and "fit_s" in fit:
+        fields["fit_s"] = fit["fit_s"]
     _record(state, key, bar, wall_s=fin.wall_s, **fields)
 
 
-def _score_row(value: bytes, state: State, case: Case) -> dict:
-    """Score what a row sent against the truth held here; trust only its estimate."""
+def _score_row(value: bytes, state: State, case: Case, method_s: float | None = None, key=None) -> dict:
+    """Score what a row sent against the truth held here; trust only its estimate, and its
+    tick times only as far as the time measured outside its process allows."""
     try:
         arrays, info = unpack(value)
     except Exception as exc:  # noqa: BLE001 - a row's bytes are untrusted
         return {"status": "error", "message": f"the row sent an unreadable result ({type(exc).__name__})"}
-    fields = _row_fields(info)
+    fields = row_fields(info)
     if fields["status"] != "ok":
         return fields
-    truth = state.truths[case]
-    n_samples, n_ticks = state.lengths[case]
-    checked = job_fns.check_estimate(arrays, n_samples, n_ticks)
-    if isinstance(checked, str):
-        return {**fields, "status": "invalid", "message": checked}
-    estimate, ticks = checked
-    fields["n_samples"] = n_samples
-    fields.update(job_fns.score_or_invalid(estimate, truth))
-    if fields["status"] in MEASURED:
-        fields.update(tick_stats(ticks, n_samples))
-    return fields
-
-
-def _row_fields(info: dict) -> dict:
-    """The fields a job may set, type-checked: a job cannot write metrics or keys."""
-    status = info.get("status") if info.get("status") in STATUSES else "error"
-    fields = {"status": status, "message": str(info.get("message", ""))[:500],
-              "params": str(info.get("params", ""))[:2000]}
-    fit_s = info.get("fit_s")
-    if isinstance(fit_s, (int, float)) and math.isfinite(fit_s):
-        fields["fit_s"] = float(fit_s)
-    if status != info.get("status"):
-        fields["message"] = f"the row sent an unknown status {str(info.get('status'))[:40]!r}"
+    fields.update(score_row(arrays, state.truths[case], *state.lengths[case], method_s=method_s))
+    if state.estimates is not None and fields["status"] == "ok":
+        state.estimates[key] = arrays["estimate"]
     return fields
 
 
@@ -355,6 +357,8 @@ def _record(state: State, key: RowKey, bar, **fields) -> None:
     if state.seal is not None:  # the column exists only in sealed runs: unsealed rows stay as they were
         row[SEALED_COLUMN] = True
     state.results.add(row)
+    if state.on_record is not None:
+        state.on_record(row)
     bar.update()
     # The truth of a case is kept only while rows of it are open.
     state.open_rows[case] -= 1
@@ -364,31 +368,6 @@ def _record(state: State, key: RowKey, bar, **fields) -> None:
 
 
 record = _record  # for executors that run whole rows elsewhere (rippleb.engine.executors)
-
-
-def _why(fin, state: State) -> str:
-    if fin.kind == "raised":
-        text = fin.value
-        if any(marker in text for marker in ("No space left", "Disk quota")):
-            return f"{ENVIRONMENT}{text}"
-        return text
-    if fin.kind == "timeout":
-        return f"killed after {state.timeout:g} s"
-    if fin.kind == "oversized":
-        return f"sent {fin.value} bytes, more than a row's result can hold"
-    if fin.kind == "garbled":
-        return (f"its process wrote into rippleb's control pipe ({bytes(fin.value)!r}...); "
-                "the job was ended and its result discarded")
-    code = fin.value
-    if code is not None and code < 0:
-        try:
-            name = signal.Signals(-code).name
-        except ValueError:
-            name = f"number {-code}"
-        if -code == signal.SIGKILL:  # not our timeout: the OOM killer or a user
-            return f"{ENVIRONMENT}process killed by {name} (out of memory, or killed from outside)"
-        return f"process killed by signal {name} (a crash?)"
-    return f"process exited with code {code} before reporting"
 
 
 @contextlib.contextmanager

@@ -18,7 +18,7 @@ Where the salt lives (docs/robustness.md, "Sealed runs"):
   through the fork server (whose freed memory every later row would inherit); they run
   rippleb's code only, and the visible logs they write name the public seed;
 * while it is in memory the runner is not dumpable (``PR_SET_DUMPABLE``, for the whole
-  of every run: :func:`rippleb.engine.isolation.undumpable`), so where the kernel refuses PID
+  of every run: :func:`rippleb.engine.process.isolation.undumpable`), so where the kernel refuses PID
   namespaces a row of the same user cannot read it (or the truths) through
   ``/proc/<runner>/mem`` either;
 * ``run.json`` records only its commitment (``sha256:`` + SHA-256 of the 32 salt bytes);
@@ -41,6 +41,7 @@ import sys
 from pathlib import Path
 
 from rippleb.errors import InputError
+from rippleb.printable import markdown_code
 
 SALT_BYTES = 32
 #: The result column that marks the rows of a sealed run (absent from unsealed runs).
@@ -68,7 +69,7 @@ class Seal:
         self.commitment = commitment(salt)
 
     def files(self) -> tuple[Path, ...]:
-        """The salt's files, which a method's worker sees covered (:mod:`rippleb.engine.isolation`)."""
+        """The salt's files, which a method's worker sees covered (:mod:`rippleb.engine.process.isolation`)."""
         return tuple(path for path in (self.save_to, self.read_from) if path is not None)
 
     def device_seed(self, seed: int) -> int:
@@ -166,8 +167,11 @@ def _resumed_seal(out: Path, salt_file) -> Seal | None:
 
 def read_salt(path) -> bytes:
     """The salt in ``path`` (``-``: standard input): 64 hex digits."""
+    from rippleb.reading import SECRET_BYTES, read_text
+
     try:
-        text = sys.stdin.read() if str(path) == "-" else Path(path).read_text(encoding="ascii")
+        text = sys.stdin.read(SECRET_BYTES + 1) if str(path) == "-" else \
+            read_text(path, SECRET_BYTES, "salt file", encoding="ascii")
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{_name(path)}: cannot read the salt: {getattr(exc, 'strerror', None) or exc}") from None
     words = text.split()
@@ -261,5 +265,5 @@ def sealed_text(frame, run: dict) -> str:
                 f"others on the public seeds' devices (rows of different runs mixed?); only the "
                 f"sealed rows are safe from a method that re-simulates its scenario.")
     return (f"Sealed: all {n} rows ran on devices drawn from a secret salt (commitment "
-            f"`{commitment_text}` in run.json), so no method could re-simulate them; the signal "
+            f"{markdown_code(commitment_text)} in run.json), so no method could re-simulate them; the signal "
             f"figures, re-simulated by the report, show the public seeds' devices instead.")

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import copy
 import itertools
-import tomllib
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,6 +32,10 @@ from rippleb.registry import unknown_name
 #: Parameters that change only the scored session of one condition: sweeping them
 #: without it would give every grid point the same rows.
 CONDITION_OF = {"ripple.drift": "aged"}
+#: The most points a sweep's grid may have, counted before it is made: the published sweeps
+#: have 4-8 values of one parameter, a grid of three parameters at ten values is 1000. A
+#: grid of 40 000 points had been expanded, a scenario built per point, until memory ran out.
+MAX_POINTS = 1000
 
 
 @dataclass(frozen=True)
@@ -68,6 +72,10 @@ def parse_params(specs: list[str]) -> list[Sweep]:
         if len(set(parsed)) != len(parsed):
             raise InputError(f"--param {name}: a value is repeated")
         sweeps.append(Sweep(PARAMS[name], tuple(parsed)))
+    points = math.prod(len(s.values) for s in sweeps)
+    if points > MAX_POINTS:
+        raise InputError(f"--param: a grid of {points} points ({' x '.join(str(len(s.values)) for s in sweeps)} "
+                         f"values), more than the {MAX_POINTS} a sweep may have (docs/robustness.md, section 11)")
     return sweeps
 
 
@@ -96,10 +104,11 @@ def swept_scenario(name_or_path, point: dict):
     impossible combination (e.g. a control rate above the swept sample rate) is refused
     with the file, key and the swept values named.
     """
+    from rippleb.reading import parse_toml
     from rippleb.scenario import Parser, read_source
 
     text, path, name = read_source(name_or_path)
-    raw = apply(tomllib.loads(text), point)
+    raw = apply(parse_toml(text, path), point)
     where = ", ".join(f"{k}={v}" for k, v in point.items())
     try:
         return Parser(path, name).scenario(raw)
@@ -132,7 +141,9 @@ def run_sweep(params, methods=None, scenarios=None, seeds=None, *, conditions=No
     from rippleb.engine.checks import check_options, check_scenario
     from rippleb.registry import Registry
     from rippleb.engine.results import KEY_COLUMNS
-    from rippleb.engine.rows import CALIBRATION, select_conditions, select_scenarios, select_seeds, split_names
+    from rippleb import interrupts
+    from rippleb.engine.rows import (CALIBRATION, check_rows, select_conditions, select_scenarios, select_seeds,
+                                     split_names)
     from rippleb.scenario import load_scenario, scored_scenarios
 
     sweeps = parse_params(_specs(params))
@@ -144,21 +155,26 @@ def run_sweep(params, methods=None, scenarios=None, seeds=None, *, conditions=No
         raise InputError("--scenarios is empty; give scenario names or .toml paths")
     given = split_names(scenarios) or scored_scenarios()
     chosen = select_scenarios(given, load_scenario)
+    condition_list = select_conditions(conditions)
+    seed_list = select_seeds(runner.DEFAULT_SEEDS if seeds is None else seeds, seed_start)
+    for sweep in sweeps:
+        needed = CONDITION_OF.get(sweep.name)
+        if needed and needed not in condition_list:
+            raise InputError(f"--param {sweep.name}: acts only under the {needed!r} condition; "
+                             f"add --conditions {needed} (given: {','.join(condition_list)})")
+    points = grid(sweeps)
+    check_rows(len(points) * len(names) * len(chosen) * len(condition_list) * len(seed_list),
+               f"{len(points)} points x {len(names)} methods x {len(chosen)} scenarios x "
+               f"{len(condition_list)} conditions x {len(seed_list)} seeds")
     entries = []
-    for point in grid(sweeps):
+    for point in points:
+        interrupts.check_interrupted()   # a scenario is built per point: Ctrl-C stops it
         device = {k: v for k, v in point.items() if PARAMS[k].device}
         calibration = swept_scenario(CALIBRATION, device)
         for scenario in chosen:
             swept = swept_scenario(scenario.path, point)
             check_scenario(swept)
             entries.append((swept, calibration, point))
-    condition_list = select_conditions(conditions)
-    for sweep in sweeps:
-        needed = CONDITION_OF.get(sweep.name)
-        if needed and needed not in condition_list:
-            raise InputError(f"--param {sweep.name}: acts only under the {needed!r} condition; "
-                             f"add --conditions {needed} (given: {','.join(condition_list)})")
-    seed_list = select_seeds(runner.DEFAULT_SEEDS if seeds is None else seeds, seed_start)
     config = {"methods": names, "conditions": condition_list, "seeds": seed_list,
               "scenarios": [str(Path(s).resolve()) if s.endswith(".toml") else s for s in dict.fromkeys(given)],
               "sweep": {s.name: list(s.values) for s in sweeps}}

@@ -61,7 +61,13 @@ def trust_sentence(column: str, joint: dict | None, record: dict | None = None) 
     cells = _cells(record, kind or "model", column)   # a log without a reference: the truth-free scores
     if not cells:
         return ""
-    ratio, counts = nearest_joint(record, float(joint["gear_ratio"]), float(joint["counts_per_rev"]))
+    try:   # run.json is a file someone else may have written: a value that is no joint says nothing
+        ratio_given, counts_given = float(joint["gear_ratio"]), float(joint["counts_per_rev"])
+    except (KeyError, TypeError, ValueError):
+        return ""
+    if not (math.isfinite(ratio_given) and math.isfinite(counts_given) and ratio_given > 0 and counts_given > 0):
+        return ""
+    ratio, counts = nearest_joint(record, ratio_given, counts_given)
     mine = [c for c in cells if (c["gear_ratio"], c["counts_per_rev"]) == (ratio, counts)]
     if not mine:
         return ""

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rippleb.report.plotting import ScenarioSignals, _amplitude, _pyplot, _save, style
+from rippleb.report.plotting import ScenarioSignals, _amplitude, _pyplot, _save, plot_text, style
 
 def speed_edges(signals, n_bins: int = 12) -> np.ndarray:
     """Equal-width bin edges of ``|joint speed|`` from 0 to its maximum while moving,
@@ -98,7 +98,7 @@ def plot_error_vs_speed(tables, out_png, seeds_text: str = "seed 0", scenarios=N
     if lows:
         ax.set_ylim(max(min(lows) / 5.0, 1e-9), max(highs) * 1.5)
     ax.set_yscale("log")
-    where = ", ".join(scenarios) if scenarios else "the signal scenarios"
+    where = ", ".join(plot_text(s) for s in scenarios) if scenarios else "the signal scenarios"
     ax.set(xlabel="|joint speed| [rad/s] (0: at rest)", ylabel="RMS error against torque_true [Nm]",
            title=f"Error against joint speed, pooled over {where}\nmean over {seeds_text} "
                  f"(bar: 95 % t-interval over devices)")
@@ -258,7 +258,7 @@ def plot_accuracy_vs_cost(frame, out_png, column: str = "rms_error_nm") -> Path:
         x, lo, hi = np.percentile(cost, [50, 25, 75])
         kw = style(name, k, points=True)
         ax.errorbar([x], [y], xerr=[[x - lo], [hi - x]], yerr=[[half if np.isfinite(half) else 0]] * 2,
-                    fmt=kw["marker"], ms=7, color=kw["color"], capsize=3, label=name)
+                    fmt=kw["marker"], ms=7, color=kw["color"], capsize=3, label=kw["label"])
     ax.set_xscale("log")
     ax.set_yscale("log")
     n_seeds, n_scen = ok["seed"].nunique(), ok["scenario"].nunique()

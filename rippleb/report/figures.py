@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from rippleb.report.error_figures import (COST_FIGURE_LABELS, error_by_speed,  # noqa: F401
-                                   error_by_speed_over_seeds, longest_rest_restart, plot_accuracy_vs_cost,
-                                   plot_error_vs_speed, plot_residual_spectra, plot_restart_zoom,
-                                   residual_spectra, speed_edges)
+                                          error_by_speed_over_seeds, longest_rest_restart, plot_accuracy_vs_cost,
+                                          plot_error_vs_speed, plot_residual_spectra, plot_restart_zoom,
+                                          residual_spectra, speed_edges)
 from rippleb.report.plotting import (MOTION_EDGE_LABEL, SIGNAL_SCENARIOS, ScenarioSignals,  # noqa: F401
-                              _amplitude, _motion_edges, _pyplot, _save, fit_methods, stream_methods, style)
+                                     _amplitude, _motion_edges, _pyplot, _save, plot_text, restream, style)
 
 #: Wave-generator speeds of the Fig. 2 replica [rev/s]: slow to brisk motor speeds.
 DEFAULT_SPEEDS = (1.0, 2.0, 4.0, 6.0, 8.0)
@@ -125,10 +125,7 @@ def plot_order_spectra(out_png: str | Path, seed: int = 0,
     fig.suptitle(f"Strain spectra of simulated device seed {seed} under a 20 Nm load "
                  f"(replica of Jung et al. 2017, Fig. 2); bar = 2, 4, 8 x speed", fontsize=10)
     fig.tight_layout()
-    out = Path(out_png)
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
+    return _save(fig, out_png, dpi=120)
 
 
 def plot_trajectory(sig: ScenarioSignals, out_png) -> Path:
@@ -200,7 +197,7 @@ def plot_estimates(sig: ScenarioSignals, out_png, seed: int = 0) -> Path:
             est = sig.estimates[name]
             rms = float(np.sqrt(np.mean((est[mask] - log.torque_ref[mask]) ** 2)))
             ax.plot(log.t, est, lw=0.9, **{**style(name, names.index(name)),
-                                          "label": f"{name} (RMS vs ref {rms:.2g} Nm)"})
+                                          "label": f"{plot_text(name)} (RMS vs ref {rms:.2g} Nm)"})
         _motion_edges(ax, sig)
         ax.legend(loc="upper right", fontsize=7)
         ax.grid(alpha=0.3)
@@ -243,6 +240,8 @@ def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
     from rippleb.simulator.conditions import DEFAULT_CONDITION
     from rippleb.report.provenance import seeds_text
     from rippleb.engine.results import swept_columns
+    from rippleb.report import order_figure
+    from rippleb.report.tables import is_recorded
     from rippleb.report.stats import measured_rows, method_order, with_condition
 
     if fmt not in FORMATS:
@@ -255,6 +254,14 @@ def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
     figures, warnings = {}, []
     figures["fig2_order_spectra"] = (plot_order_spectra(path("fig2_order_spectra"), seed=seed),
                                      f"Strain spectra over time and over angle (Fig. 2 replica, seed {seed})")
+    if not is_recorded(frame):   # simulated devices: the run's own, re-simulated
+        population_seeds = sorted(int(k) for k in (frame["seed"].unique() if speed_seeds is None else speed_seeds))
+        devices = seeds_text(population_seeds).replace("(", "devices (")
+        cases = order_figure.population(population_seeds)
+        figures["fig2_orders_vs_speed"] = (
+            order_figure.plot_orders_vs_speed(cases, path("fig2_orders_vs_speed"), devices),
+            f"Strain order amplitudes against wave-generator speed over {devices} (Fig. 2 over the "
+            f"population): {order_figure.fraction_sentence(cases)}")
     frame = with_condition(frame)
     # a recording without a reference (no-reference rows) is still drawn by its truth-free column
     ok = measured_rows(frame)
@@ -322,21 +329,15 @@ def _cost_figure_column(ok) -> str | None:
 
 
 def _signals_of_seed(methods, scenarios, seed: int) -> tuple[dict, list]:
-    """Fit ``methods`` on the calibration log of ``seed`` and stream each scenario."""
-    fitted, errors = fit_methods(methods, seed)
-    warnings = [f"figures: {m} not drawn on seed {seed}, fit failed: {e}" for m, e in errors.items()]
-    signals = {}
-    for scenario in scenarios:
-        signals[scenario] = stream_methods(fitted, scenario, seed)
-        warnings += [f"figures: {m} not drawn on {scenario} seed {seed}: {e}"
-                     for m, e in signals[scenario].errors.items()]
-    return signals, warnings
+    """Fit ``methods`` on the calibration log of ``seed`` and stream each scenario, in the
+    methods' sandboxed workers (:func:`rippleb.report.plotting.restream`)."""
+    return restream(methods, scenarios, seed)
 
 
 def _check_against_rows(sig: ScenarioSignals, ok, scenario: str, seed: int) -> list[str]:
     """A figure's signal must be the one its row scored; a method whose ``reset`` leaks
     state between runs (or a stale table) shows up here as a mismatch."""
-    from rippleb.metrics import rms_error
+    from rippleb.scoring.metrics import rms_error
 
     out = []
     mask = np.asarray(sig.sim.eval_mask, bool)

@@ -25,7 +25,7 @@ from rippleb.files import atomic_path
 from rippleb.report.markdown_html import inline_html, markdown_html, table_html
 from rippleb.report.palette import look
 from rippleb.report.stats import (condition_order, fmt_interval, interval_frame, method_order, scenario_order,
-                           with_condition)
+                                  with_condition)
 
 STYLE = """body{font-family:system-ui,sans-serif;margin:1.5em auto;max-width:1200px;color:#222}
 table{border-collapse:collapse;margin:.5em 0 1.5em;font-size:13px}
@@ -126,15 +126,10 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
 # --------------------------------------------------------------------------- tables
 
 def _simulated_body(frame) -> list[str]:
-    """The README's summary, its sentences, what each method did with the gear's torque and
-    each method in plain words, each table best first."""
-    from rippleb.report.sections import gear_section, verdicts_section
-    from rippleb.report.tables import condition_headline, condition_summary_markdown
+    """The README's summary (:func:`rippleb.report.sections.summary_sections`), each table best first."""
+    from rippleb.report.sections import summary_sections
 
-    text = "\n".join(["## Method x condition: mean RMS error over the scenarios [Nm]", "",
-                      condition_summary_markdown(frame), ""] + [f"- {s}" for s in condition_headline(frame)]
-                     + [""] + gear_section(frame) + verdicts_section(frame))
-    return [markdown_html(text, sort_tables=True)]
+    return [markdown_html("\n".join(summary_sections(frame)), sort_tables=True)]
 
 
 def _recorded_body(frame, prov: dict) -> list[str]:
@@ -145,11 +140,13 @@ def _recorded_body(frame, prov: dict) -> list[str]:
 
 
 def metric_columns(frame) -> list[str]:
-    """Every numeric metric column of the rows that has a value, the truth-free ones included."""
-    from rippleb.metrics import METRIC_COLUMNS
-    from rippleb.truthfree import TRUTH_FREE_COLUMNS
+    """Every numeric metric column of the rows that has a value, the truth-free ones and the
+    error against the rebuilt torque included."""
+    from rippleb.scoring.metrics import METRIC_COLUMNS
+    from rippleb.scoring.rebuilt import REFERENCE_COLUMNS
+    from rippleb.scoring.truthfree import TRUTH_FREE_COLUMNS
 
-    return [c for c in METRIC_COLUMNS + TRUTH_FREE_COLUMNS if c in frame and frame[c].notna().any()]
+    return [c for c in METRIC_COLUMNS + TRUTH_FREE_COLUMNS + REFERENCE_COLUMNS if c in frame and frame[c].notna().any()]
 
 
 def _metrics_table(rows, column: str = "rms_error_nm") -> str:
@@ -186,6 +183,18 @@ def _provenance_table(prov: dict) -> str:
 
 # --------------------------------------------------------------------------- figures
 
+def _text(value) -> str:
+    """A name as plotly's text: plotly reads tags and entities in legends, titles and hover
+    labels (its own subset of HTML, links included), so a name is escaped for HTML."""
+    return html.escape(str(value))
+
+
+def _hover(rows):
+    """The hover fields of each row: method, scenario, condition (escaped) and seed."""
+    return np.column_stack([[_text(v) for v in rows[c]] for c in ("method", "scenario", "condition")]
+                           + [rows["seed"]])
+
+
 def _marker(method: str, index: int) -> dict:
     """``method``'s marker in a scatter (:mod:`rippleb.report.palette`): colour and symbol."""
     colour, symbol, _dash = look(method, index)
@@ -213,7 +222,7 @@ def _rows_figure(frame, column: str = "rms_error_nm"):
     ok = frame[frame["status"] == "ok"]
     conditions = condition_order(ok["condition"].unique()) or ["same-session"]
     fig = make_subplots(rows=len(conditions), cols=1, shared_xaxes=True,
-                        subplot_titles=[f"condition {c}" for c in conditions], vertical_spacing=0.08)
+                        subplot_titles=[f"condition {_text(c)}" for c in conditions], vertical_spacing=0.08)
     methods = method_order(ok["method"].unique())
     scenarios = scenario_order(ok["scenario"].unique())
     for k, condition in enumerate(conditions, start=1):
@@ -222,14 +231,14 @@ def _rows_figure(frame, column: str = "rms_error_nm"):
             mine = rows[rows["method"] == m]
             fig.add_trace(go.Scatter(
                 x=[scenarios.index(s) + (i - len(methods) / 2) * 0.08 for s in mine["scenario"]],
-                y=mine[column], mode="markers", name=m, legendgroup=m, showlegend=(k == 1),
+                y=mine[column], mode="markers", name=_text(m), legendgroup=m, showlegend=(k == 1),
                 marker={**_marker(m, i), "size": 7, "opacity": 0.8},
-                customdata=np.column_stack([mine["method"], mine["scenario"], mine["condition"], mine["seed"]]),
+                customdata=_hover(mine),
                 hovertemplate="method %{customdata[0]}<br>scenario %{customdata[1]}<br>condition "
                               "%{customdata[2]}<br>seed %{customdata[3]}<br>" + column + " %{y:.4g}<extra></extra>"),
                 row=k, col=1)
         fig.update_yaxes(type="log", title_text=AXIS_TITLES.get(column, column), row=k, col=1)
-    fig.update_xaxes(tickvals=list(range(len(scenarios))), ticktext=scenarios)
+    fig.update_xaxes(tickvals=list(range(len(scenarios))), ticktext=[_text(s) for s in scenarios])
     fig.update_layout(height=320 * len(conditions) + 80, margin={"t": 40, "b": 40}, legend={"orientation": "h"})
     return fig
 
@@ -244,8 +253,8 @@ def _cost_figure(frame, column: str = "rms_error_nm"):
     for i, m in enumerate(method_order(ok["method"].unique())):
         mine = ok[ok["method"] == m]
         fig.add_trace(go.Scatter(
-            x=mine[cost], y=mine[column], mode="markers", name=m, marker={**_marker(m, i), "size": 7},
-            customdata=np.column_stack([mine["method"], mine["scenario"], mine["condition"], mine["seed"]]),
+            x=mine[cost], y=mine[column], mode="markers", name=_text(m), marker={**_marker(m, i), "size": 7},
+            customdata=_hover(mine),
             hovertemplate="method %{customdata[0]}<br>scenario %{customdata[1]}<br>condition %{customdata[2]}"
                           "<br>seed %{customdata[3]}<br>" + cost + " %{x:.3g} us<br>" + column
                           + " %{y:.4g}<extra></extra>"))
@@ -267,11 +276,10 @@ def _restart_figure(frame, seed, signals):
     if seed is None or "stop-restart" not in set(ok["scenario"]):
         return None
     sig = (signals or {}).get("stop-restart")
-    if sig is None:
-        from rippleb.report.figures import fit_methods, stream_methods
+    if sig is None:   # re-streamed in the methods' sandboxed workers, as the figures are
+        from rippleb.report.plotting import restream
 
-        fitted, _ = fit_methods(method_order(ok["method"].unique()), seed)
-        sig = stream_methods(fitted, "stop-restart", seed)
+        sig = restream(method_order(ok["method"].unique()), ["stop-restart"], seed)[0]["stop-restart"]
     log = sig.sim.log
     every = max(1, int(round(log.spec.fs / log.spec.control_rate)))
     pick = slice(every - 1, None, every)
@@ -279,7 +287,7 @@ def _restart_figure(frame, seed, signals):
     fig.add_trace(go.Scatter(x=log.t[pick], y=log.torque_true[pick], name="torque_true",
                              line={"color": "black", "width": 2}))
     for i, m in enumerate(method_order(sig.estimates)):
-        fig.add_trace(go.Scatter(x=log.t[pick], y=sig.estimates[m][pick], name=m,
+        fig.add_trace(go.Scatter(x=log.t[pick], y=sig.estimates[m][pick], name=_text(m),
                                  line={**_line(m, i), "width": 1}))
     fig.update_layout(xaxis={"title": "time [s]", "rangeslider": {"visible": True}},
                       yaxis={"title": "torque [Nm]"}, height=520, margin={"t": 30})

@@ -1,4 +1,11 @@
-"""Markdown cells and tables: what every table of the report, and Table I, is written with."""
+"""Markdown cells and tables: what every table of the report, and Table I, is written with.
+
+A cell or a sentence that holds text rippleb does not choose (a method's label or message,
+a file's name, a value read from a run directory) gets it through
+:func:`rippleb.printable.markdown_text` or :func:`~rippleb.printable.markdown_code`; what
+reaches a table cell also has its ``|`` escaped here, by :func:`markdown`, the one place
+that writes a table.
+"""
 
 from __future__ import annotations
 
@@ -6,10 +13,11 @@ import numpy as np
 
 from rippleb.printable import escaped
 
-
 def markdown(rows, headers) -> str:
     """A GitHub Markdown table; cells are printed as given, but for ``|``, escaped as ``\\|``
-    (a scenario file ``a|b.toml`` would otherwise split its cell in two)."""
+    (a scenario file ``a|b.toml`` would otherwise split its cell in two). A cell that holds
+    untrusted text is given through :func:`~rippleb.printable.markdown_text` or
+    :func:`~rippleb.printable.markdown_code`."""
     from tabulate import tabulate
 
     rows = [[escape_cell(c) for c in row] for row in rows]

@@ -1,9 +1,10 @@
 """One look per method, the same in every figure of the report and of the HTML page.
 
-Fourteen methods in one figure cannot be told apart by colour alone, so each has a colour,
-a marker and a line dash, and no two share all three. A family shares its colour and
+Sixteen methods in one figure cannot be told apart by colour alone, so each has a colour,
+a marker and a line dash, and no two share colour and marker. A family shares its colour and
 differs in marker and dash (``order-tracking`` and its two ablations; ``angle-adaptive``,
-its frozen map and ``gear-aware``, which fits that map); the colours are the Okabe-Ito
+its frozen map, ``gear-aware``, which fits that map, and ``gear-keeping``, which learns it
+beside the gear's torque; ``gain-tuned``, hardware compensation, beside ``current-based``); the colours are the Okabe-Ito
 palette, told apart by colour-blind readers too (Okabe & Ito, "Color Universal Design",
 2008), without its yellow, which a white page washes out. A method not listed (a plugin)
 gets the next unused colour and marker.
@@ -29,7 +30,8 @@ LOOKS = {
     "kalman-ripple": (ORANGE, "circle", "solid"), "fourier-lms": (SKY, "circle", "solid"),
     "periodic-dob": (SKY, "square", "dash"),
     "angle-adaptive": (BLUE, "circle", "solid"), "angle-adaptive-frozen": (BLUE, "square", "dash"),
-    "gear-aware": (BLUE, "triangle-up", "dot"),
+    "gear-aware": (BLUE, "triangle-up", "dot"), "gear-keeping": (BLUE, "diamond", "dashdot"),
+    "gain-tuned": (PURPLE, "square", "dash"),
 }
 _COLOURS = (ORANGE, SKY, GREEN, BLUE, VERMILLION, PURPLE, GREY)
 _MARKERS = ("x", "star", "triangle-down", "cross", "hexagon", "pentagon")

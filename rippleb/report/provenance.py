@@ -6,7 +6,6 @@ report`` adds its own and prints both as a table (:func:`provenance_markdown`).
 
 from __future__ import annotations
 
-import json
 import os
 import platform
 import shlex
@@ -16,6 +15,7 @@ import time
 from pathlib import Path
 
 from rippleb.errors import InputError
+from rippleb.printable import markdown_code, markdown_text
 
 #: The distributions whose code computes a number of a row: the simulator (numpy, scipy,
 #: numba and its llvmlite, Pinocchio and the robot models), the methods (filterpy), and
@@ -69,8 +69,10 @@ def environment_warnings(frame, run: dict) -> list[str]:
     changed at a ``--resume`` (recorded in ``run["environment_changes"]``), or the rows
     hold more than one rippleb, Python, numpy or numeric-path value, or rows that did not
     run the portable numeric paths (:mod:`rippleb.numerics`)."""
-    out = [f"the run was resumed on another environment ({'; '.join(change['changes'])}): "
-           f"{_portability_note(change)}" for change in run.get("environment_changes", [])]
+    changes = run.get("environment_changes")
+    out = [f"the run was resumed on another environment ({'; '.join(map(str, change['changes']))}): "
+           f"{_portability_note(change)}" for change in (changes if isinstance(changes, list) else [])
+           if isinstance(change, dict) and isinstance(change.get("changes"), list)]
     for col in ("rippleb_version", "python", "numpy", "numerics"):
         values = sorted(str(v) for v in frame[col].dropna().unique()) if col in frame else []
         if len(values) > 1:
@@ -97,7 +99,7 @@ def environment_changes(before: dict, after: dict) -> list[str]:
     two provenance records (entries one of them lacks are said to be unrecorded)."""
     changes = []
     for group in ("versions", "machine"):
-        old, new = before.get(group) or {}, after.get(group) or {}
+        old, new = (record.get(group) if isinstance(record.get(group), dict) else {} for record in (before, after))
         for name in sorted(set(old) | set(new)):
             if old.get(name) != new.get(name):
                 changes.append(f"{name}: {old.get(name, 'not recorded')} -> {new.get(name, 'not recorded')}")
@@ -170,14 +172,13 @@ def _git(root: Path, *args: str) -> str:
 def read_run_provenance(run_dir: Path) -> dict:
     """What ``rippleb run`` recorded in ``DIR/provenance.json`` (empty if the run was made
     through the Python API), with the selection of ``DIR/run.json``."""
+    from rippleb.reading import RUN_FILE_BYTES, parse_json, read_text
+
     out = {}
     for name in ("run.json", "provenance.json"):
         path = Path(run_dir) / name
-        if path.is_file():
-            try:
-                value = json.loads(path.read_text())
-            except (OSError, ValueError) as exc:
-                raise InputError(f"{path}: cannot read: {exc}") from None
+        if path.is_symlink() or path.exists():
+            value = parse_json(read_text(path, RUN_FILE_BYTES, "run file", in_run_dir=True), path)
             if not isinstance(value, dict):
                 raise InputError(f"{path}: not a rippleb run file (a JSON {type(value).__name__}, "
                                  f"expected an object)")
@@ -186,29 +187,41 @@ def read_run_provenance(run_dir: Path) -> dict:
 
 
 def provenance_markdown(prov: dict) -> str:
-    """The provenance section of the README (values as recorded, none typed)."""
+    """The provenance section of the README (values as recorded, none typed). Every value
+    comes from a file of the run directory, which anyone who could write it chose: each is
+    written as text (:func:`~rippleb.printable.markdown_text`) or code, never as Markdown."""
     from rippleb.report.markdown import markdown
 
     run, rep = prov.get("run", {}), prov["report"]
+    text = markdown_text
+    resumes = run.get("resumes", [])
     rows = [["command of the run", _code(run.get("command", "not recorded (run made through the Python API)"))],
-            ["resumed with", "; ".join(_code(c) for c in run.get("resumes", [])) or "-"],
-            ["run started", run.get("started", "not recorded")],
-            ["run wall time", f"{run['wall_s']:.0f} s" if "wall_s" in run else "not recorded"],
-            ["jobs (rows run in parallel)", str(run.get("jobs", "not recorded"))],
-            ["CPUs of the run's machine", str(run.get("cpu_count", "not recorded"))],
+            ["resumed with", "; ".join(_code(c) for c in resumes if isinstance(resumes, list)) or "-"],
+            ["run started", text(run.get("started", "not recorded"))],
+            ["run wall time", _seconds(run["wall_s"]) if "wall_s" in run else "not recorded"],
+            ["jobs (rows run in parallel)", text(run.get("jobs", "not recorded"))],
+            ["CPUs of the run's machine", text(run.get("cpu_count", "not recorded"))],
             ["seeds", prov["seeds_text"]],
             ["sealed", _sealed_cell(run)],
-            ["rippleb", str(run.get("rippleb_version", prov.get("rows_rippleb_version", "not recorded")))],
-            ["git commit of the run", git_text(run)],
-            ["Python", str(run.get("python", prov.get("rows_python", "not recorded")))],
-            ["numpy / scipy / pinocchio", " / ".join(str(run.get(k, "not recorded"))
+            ["rippleb", text(run.get("rippleb_version", prov.get("rows_rippleb_version", "not recorded")))],
+            ["git commit of the run", text(git_text(run))],
+            ["Python", text(run.get("python", prov.get("rows_python", "not recorded")))],
+            ["numpy / scipy / pinocchio", " / ".join(text(run.get(k, "not recorded"))
                                                     for k in ("numpy", "scipy", "pinocchio"))],
-            ["CPU", str(run.get("cpu", prov.get("rows_cpu", "not recorded")))],
+            ["CPU", text(run.get("cpu", prov.get("rows_cpu", "not recorded")))],
             *machine_rows(run),
-            ["platform", str(run.get("platform", "not recorded"))],
+            ["platform", text(run.get("platform", "not recorded"))],
             ["command of this report", _code(rep["command"])],
-            ["git commit of this report", git_text(rep)]]
+            ["git commit of this report", text(git_text(rep))]]
     return markdown(rows, ["", "value"])
+
+
+def _seconds(value) -> str:
+    """A recorded wall time, or the recorded value as text if it is not a number."""
+    try:
+        return f"{float(value):.0f} s"
+    except (TypeError, ValueError):
+        return markdown_text(value)
 
 
 def environment_sentence(run: dict) -> str:
@@ -217,12 +230,15 @@ def environment_sentence(run: dict) -> str:
     if not versions or not machine:
         return ("Versions and numeric paths of the run: not recorded (a run made before rippleb "
                 "recorded them; docs/reproducibility.md).")
-    names = ", ".join(f"{k} {versions[k]}" for k in ("numpy", "scipy", "numba", "pin") if k in versions)
+    if not isinstance(versions, dict) or not isinstance(machine, dict):
+        return "Versions and numeric paths of the run: not readable in its provenance.json."
+    names = ", ".join(f"{k} {markdown_text(versions[k])}" for k in ("numpy", "scipy", "numba", "pin")
+                      if k in versions)
     if machine.get("numerics") == "portable":
         how = ("portable numeric paths: with these versions (`constraints.txt` for `results/`) every "
                "row re-runs bit for bit on any x86-64 CPU with AVX2, AVX-512 or not")
     else:
-        how = (f"the host's own numeric paths ({machine.get('numerics')}): rows may differ in "
+        how = (f"the host's own numeric paths ({markdown_text(machine.get('numerics'))}): rows may differ in "
                "their last bits on another CPU")
     return f"Made with {names} on {how} (docs/reproducibility.md; all versions under Provenance)."
 
@@ -230,7 +246,7 @@ def environment_sentence(run: dict) -> str:
 def _sealed_cell(run: dict) -> str:
     sealed = run.get("sealed")
     if isinstance(sealed, dict) and sealed.get("commitment"):
-        return f"yes: devices drawn from a secret salt, commitment {_code(str(sealed['commitment']))}"
+        return f"yes: devices drawn from a secret salt, commitment {markdown_code(sealed['commitment'])}"
     return "no: public seeds"
 
 
@@ -240,18 +256,22 @@ def machine_rows(run: dict) -> list[list[str]]:
     versions, machine = run.get("versions"), run.get("machine")
     if not versions or not machine:
         return [["versions and numeric paths", "not recorded (a run made before they were recorded)"]]
-    return [["versions that compute the numbers", ", ".join(f"{k} {v}" for k, v in versions.items())],
-            ["CPU SIMD features (LLVM)", machine.get("cpu_simd", "not recorded")],
-            ["numba compiles for", machine.get("numba_cpu", "not recorded")],
-            *([["CPU description faked", f"RIPPLEB_FAKE_CPU={machine['fake_cpu']} (a test of the "
+    if not isinstance(versions, dict) or not isinstance(machine, dict):
+        return [["versions and numeric paths", "not readable (not an object in provenance.json)"]]
+    text = markdown_text
+    return [["versions that compute the numbers", ", ".join(f"{text(k)} {text(v)}" for k, v in versions.items())],
+            ["CPU SIMD features (LLVM)", text(machine.get("cpu_simd", "not recorded"))],
+            ["numba compiles for", text(machine.get("numba_cpu", "not recorded"))],
+            *([["CPU description faked", f"RIPPLEB_FAKE_CPU={text(machine['fake_cpu'])} (a test of the "
                  "description; the numbers came from the real CPU)"]] if machine.get("fake_cpu") else []),
-            ["numeric paths", f"{machine.get('numerics', 'not recorded')} (numpy dispatch "
-             f"{machine.get('numpy_dispatch', '?')}, OpenBLAS {machine.get('openblas', '?')}, "
-             f"{machine.get('libc', '?')})"]]
+            ["numeric paths", f"{text(machine.get('numerics', 'not recorded'))} (numpy dispatch "
+             f"{text(machine.get('numpy_dispatch', '?'))}, OpenBLAS {text(machine.get('openblas', '?'))}, "
+             f"{text(machine.get('libc', '?'))})"]]
 
 
-def _code(text: str) -> str:
-    return f"`{text}`" if text and not text.startswith("not recorded") else text
+def _code(text) -> str:
+    text = str(text)
+    return markdown_code(text) if text and not text.startswith("not recorded") else text
 
 
 def git_text(info: dict) -> str:

@@ -3,9 +3,9 @@
 A recording has no ``torque_true`` and often no ``torque_ref``. Its rows are ranked by the
 best score they hold (:func:`ranking_column`): the error against ``torque_true`` if any row
 has one; with a model reference, the error against the torque rebuilt from the strain
-(``rms_error_rebuilt_nm``, :mod:`rippleb.rebuilt`: the model lacks the gear's own torque,
+(``rms_error_rebuilt_nm``, :mod:`rippleb.scoring.rebuilt`: the model lacks the gear's own torque,
 and the error against it rewards erasing that); with a transducer, the error against it;
-else the truth-free :data:`TRUTH_FREE_RANKING` (``rippleb/truthfree.py``). Every other
+else the truth-free :data:`TRUTH_FREE_RANKING` (``rippleb/scoring/truthfree.py``). Every other
 score is shown beside it with its own rank, and how far the ranking agreed with the truth
 on the panel's nearest joint (:mod:`rippleb.report.agreement`). One log is one device: no
 intervals. Every number comes from the rows, and from the panel's record for that sentence.
@@ -15,9 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from rippleb.printable import escaped, markdown_code, markdown_text
 from rippleb.report.markdown import first_line, markdown, one_line, plural
 from rippleb.report.stats import measured_rows, method_order, scenario_order
-from rippleb.scorable import MEASURED
+from rippleb.scoring.scorable import MEASURED
 from rippleb.report.tables import failed_markdown, is_recorded, summary_text, timing_cells
 
 #: The truth-free column a log without any reference is ranked by: the one whose ranking
@@ -104,8 +105,10 @@ def _cell(value, rank) -> str:
     return f"{value:.3g}" + (f" ({int(rank)})" if np.isfinite(rank) else "")
 
 
-def log_markdown(rows) -> str:
-    """The table of one log: a line per method, best first by :func:`ranking_column`."""
+def log_markdown(rows, name=markdown_text) -> str:
+    """The table of one log: a line per method, best first by :func:`ranking_column`;
+    ``name`` writes a method's name for the output (:func:`~rippleb.printable.escaped` for a
+    terminal)."""
     column = ranking_column(rows)
     table = log_table(rows, column)
     columns = shown_columns(rows)
@@ -113,7 +116,7 @@ def log_markdown(rows) -> str:
     lines = []
     for i, r in enumerate(table.to_dict("records"), start=1):
         place = str(i) if np.isfinite(float(r.get(column, np.nan))) else "-"   # nothing to rank it by
-        lines.append([place, r["method"]] + [_cell(float(r[c]), r[f"rank:{c}"]) for c in columns]
+        lines.append([place, name(r["method"])] + [_cell(float(r[c]), r[f"rank:{c}"]) for c in columns]
                      + [f"{cost[r['method']]:.3g}" if np.isfinite(cost.get(r["method"], np.nan)) else "n/a"])
     heads = ["rank", "method"] + list(columns) + ["p50 [us]"]
     return markdown(lines, heads) + f"\n\n{UNITS_NOTE}"
@@ -165,12 +168,12 @@ def leader_sentence(rows, column: str) -> str:
     if table.empty:
         return "No ok row has a value to rank by."
     first = table.iloc[0]
-    text = f"`{first['method']}` ranks first by `{column}` ({first[column]:.3g} {RECORDED_COLUMNS[column][1]})"
+    text = f"{markdown_code(first['method'])} ranks first by `{column}` ({first[column]:.3g} {RECORDED_COLUMNS[column][1]})"
     raw = table[table["method"] == "raw"]
     if "ripple_wg_nm" in table and len(raw) and np.isfinite(raw["ripple_wg_nm"].iloc[0]) \
             and raw["ripple_wg_nm"].iloc[0] > 0:
         base = float(raw["ripple_wg_nm"].iloc[0])
-        shares = [f"`{r.method}` {1 - r.ripple_wg_nm / base:.0%}" for r in table.itertuples()
+        shares = [f"{markdown_code(r.method)} {1 - r.ripple_wg_nm / base:.0%}" for r in table.itertuples()
                   if r.method != "raw" and np.isfinite(r.ripple_wg_nm)]
         text += (f". Of the ripple at WG orders 2, 4, 8 that `raw` (the calibrated strain) holds, "
                  f"{base:.3g} Nm, each method removed: {', '.join(shares)}")
@@ -185,7 +188,7 @@ def recorded_tables_markdown(frame, joint: dict | None = None) -> str:
     for log in scenario_order(frame["scenario"].unique()):
         rows = frame[frame["scenario"] == log]
         column = ranking_column(rows)
-        parts += [f"## `{log}`: methods ranked by `{column}`", "", basis_sentence(column, joint), "",
+        parts += [f"## {markdown_code(log)}: methods ranked by `{column}`", "", basis_sentence(column, joint), "",
                   log_markdown(rows) if len(measured_rows(rows)) else "(no rows to rank)", "",
                   f"- {leader_sentence(rows, column)}", ""]
     parts += [f"### {CAVEATS_TITLE}", ""] + [f"- {c}" for c in TRUTH_FREE_CAVEATS] + [""]
@@ -203,13 +206,14 @@ def recorded_summary_text(frame, joint: dict | None = None) -> str:
         rows = frame[frame["scenario"] == log]
         column = ranking_column(rows)
         n_ok = len(measured_rows(rows))
-        parts += [f"{log}: {plural(n_ok, 'ranked row')} of {len(rows)}, ranked by {column}", ""]
-        parts += [log_markdown(rows) if n_ok else "(no rows to rank)", ""]
+        parts += [f"{escaped(log)}: {plural(n_ok, 'ranked row')} of {len(rows)}, ranked by {column}", ""]
+        parts += [log_markdown(rows, escaped) if n_ok else "(no rows to rank)", ""]
         trust = trust_sentence(column, joint) if n_ok else ""
         parts += [trust, ""] if trust else []
     failed = frame[~frame["status"].isin(MEASURED)]
     for r in failed.itertuples():
-        parts.append(f"- {r.method} / {r.scenario}: {r.status}: {one_line(first_line(r.message))}")
+        parts.append(f"- {escaped(r.method)} / {escaped(r.scenario)}: {escaped(r.status)}: "
+                     f"{one_line(first_line(r.message))}")
     return "\n".join(parts).rstrip()
 
 

@@ -7,6 +7,9 @@ is typed here: each comes from the rows.
 
 from __future__ import annotations
 
+from rippleb.printable import markdown_code
+from rippleb.report.gear_section import gear_markdown
+from rippleb.report.layouts_section import layouts_markdown
 from rippleb.report.markdown import plural
 from rippleb.report.stats import condition_order, with_condition
 from rippleb.report.tables import condition_headline, condition_summary_markdown, is_recorded
@@ -30,7 +33,7 @@ READING_SIMULATED = """## Reading these tables
   torque at orders 1 and 2, the ripple's own, through the joint's dynamics
   (`docs/physics.md`, "Transmission error"). `torque_ref` does not know it. A method that
   removes everything at those orders removes it too and is charged for it in
-  `rms_error_nm`; `gear_erased_fraction` and `rms_error_without_gear_nm` say what each
+  `rms_error_nm`; `gear_removed_fraction` and `rms_error_without_gear_nm` say what each
   method did with it.
 - `realistic` is the same joint as `same-session` with the physics no method models turned on
   at their documented sizes, in the calibration session too: gauge dynamics that change the
@@ -65,24 +68,17 @@ READING_RECORDED = """## Reading these tables
 - Timing columns depend on the machine and its load; compare methods within one run."""
 
 
-def gear_section(frame) -> list[str]:
-    """What each method did with the gear's real torque (docs/metrics.md, "What a method
-    erased"): the share it erased and its error against the joint without it, per condition."""
-    if "gear_erased_fraction" not in frame or not frame["gear_erased_fraction"].notna().any():
-        return []
-    return ["## What each method did with the gear's real torque", "",
-            "Every harmonic drive's transmission error puts real torque at the ripple's own orders "
-            "(docs/physics.md, \"Transmission error\"). `gear_erased_fraction`: the share of it a "
-            "method removed (0 kept, 1 erased; ripple left at orders 1 and 2 moves it on single "
-            "devices, so read the means). A torque controller needs the real torque and ranks by "
-            "`rms_error_nm` above; an application that wants the gear's torque gone ranks by "
-            "`rms_error_without_gear_nm`.", "",
-            "### `gear_erased_fraction` (mean over the scenarios, 95 % interval)", "",
-            condition_summary_markdown(frame, "gear_erased_fraction"), "",
-            "### `rms_error_without_gear_nm` (mean over the scenarios, 95 % interval)", "",
-            condition_summary_markdown(frame, "rms_error_without_gear_nm"), ""] + \
-        [f"- {s}" for s in condition_headline(frame, "rms_error_without_gear_nm")] + [""]
-
+def summary_sections(frame) -> list[str]:
+    """The lines of a simulated run's summary, as ``README.md`` and ``index.html`` both show it:
+    the method x condition table and its sentences, what each method did with the gear's torque
+    (:mod:`rippleb.report.gear_section`), the gauge layouts of a layout sweep
+    (:mod:`rippleb.report.layouts_section`) and each method in plain words."""
+    parts = ["## Method x condition (mean `rms_error_nm` over the scenarios, 95 % interval)", "",
+             "Per seed (device), the mean RMS error over the scenarios every method finished under "
+             "that condition; then mean ± 95 % t-interval over seeds.", "",
+             condition_summary_markdown(frame), ""]
+    parts += [f"- {s}" for s in condition_headline(frame)] + [""]
+    return parts + gear_markdown(frame) + layouts_markdown(frame) + verdicts_section(frame)
 
 
 def verdicts_section(frame) -> list[str]:
@@ -107,7 +103,7 @@ def conditions_note(frame) -> str:
     if len(conditions) != 1:
         return ""
     others = [c for c in CONDITIONS if c != conditions[0]]
-    return (f"Only the condition `{conditions[0]}` ran: every number below is of joints in that state. "
+    return (f"Only the condition {markdown_code(conditions[0])} ran: every number below is of joints in that state. "
             f"`rippleb run --conditions all` runs the {plural(len(others), 'other')} too "
             f"({', '.join(f'`{c}`' for c in others)}: what happened to the joint between its calibration and "
             f"the scored session; `rippleb list` says what each changes), and the report then says under "

@@ -18,7 +18,8 @@ PAPER_SCENARIO = "paper-quintic"
 #: The order methods appear in (baselines, the paper's comparison, then the alternatives).
 METHOD_ORDER = ("raw", "lowpass", "current-based", "order-tracking", "order-tracking-no-deadzone",
                 "order-tracking-no-backprop", "switched-notch", "kalman-ripple", "angle-adaptive",
-                "angle-adaptive-frozen", "gear-aware", "spatial-filter", "fourier-lms", "periodic-dob")
+                "angle-adaptive-frozen", "gear-aware", "gear-keeping", "spatial-filter", "fourier-lms",
+                "periodic-dob", "gain-tuned")
 
 
 def t_interval(values, confidence: float = CONFIDENCE) -> tuple[float, float, int]:
@@ -77,9 +78,9 @@ def ok_rows(frame):
 
 def measured_rows(frame):
     """The rows whose method ran to the end on a log it may be scored on
-    (:data:`rippleb.scorable.MEASURED`: ``ok``, and ``no-reference`` rows of a recording
+    (:data:`rippleb.scoring.scorable.MEASURED`: ``ok``, and ``no-reference`` rows of a recording
     without a reference, still ranked by their truth-free scores)."""
-    from rippleb.scorable import MEASURED
+    from rippleb.scoring.scorable import MEASURED
 
     return frame[frame["status"].isin(MEASURED)]
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import itertools
 from pathlib import Path
 
+from rippleb.engine.params import PARAMS
 from rippleb.engine.results import swept_columns
 
 ERROR_COLUMN = "rms_error_nm"
@@ -59,7 +60,7 @@ def points(frame, column: str):
 
 
 def _plot(frame, column: str, out_dir: Path) -> Path:
-    from rippleb.report.plotting import _pyplot, _save, style
+    from rippleb.report.plotting import _pyplot, _save, plot_text, style
 
     plt = _pyplot()
     table = points(frame, column)
@@ -76,13 +77,17 @@ def _plot(frame, column: str, out_dir: Path) -> Path:
                 kw = style(method, i, points=True)
                 kw["ls"] = LINESTYLES[style_i % len(LINESTYLES)] if others else kw["ls"]
                 if others:
-                    kw["label"] = f"{method} ({', '.join(f'{c}={v:g}' for c, v in zip(others, combo))})"
+                    kw["label"] = f"{plot_text(method)} ({', '.join(f'{c}={v:g}' for c, v in zip(others, combo))})"
                 ax.errorbar(line[column], line["mean"], yerr=line["half"].fillna(0.0), ms=3, capsize=3, **kw)
         if column in LOG_SCALE:
             ax.set_xscale("log")
+        choices = PARAMS[column].choices if column in PARAMS else ()
+        if choices:   # a layout: its position in the list, labelled by its name
+            shown = sorted(int(v) for v in table[column].unique())
+            ax.set_xticks(shown, [PARAMS[column].name_of(v) for v in shown], rotation=30, fontsize=7)
         ax.set_yscale("log")
         ax.set_xlabel(column)
-        ax.set_title(f"{scenario}, {condition}", fontsize=9)
+        ax.set_title(f"{plot_text(scenario)}, {plot_text(condition)}", fontsize=9)
         ax.grid(True, which="both", alpha=0.3)
     axes[0][0].set_ylabel("RMS error vs true torque [Nm]")
     axes[0][-1].legend(fontsize=7, loc="center left", bbox_to_anchor=(1.02, 0.5))

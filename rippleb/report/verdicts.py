@@ -8,6 +8,7 @@ it cannot follow. No number is typed here. A plugin gets the computed part only.
 
 from __future__ import annotations
 
+from rippleb.printable import markdown_code as code
 from rippleb.report.stats import fmt_interval, method_order
 from rippleb.report.tables import condition_summary
 
@@ -40,10 +41,16 @@ MECHANISMS = {
     "angle-adaptive-frozen": "the calibration's map, never adapted: exact while the joint stays as "
                              "calibrated, wrong by whatever changed since (aging, re-assembly)",
     "gear-aware": "angle-adaptive-frozen's map fitted beside an inertial model of the gear's "
-                  "transmission-error torque, which it keeps: it removes what the calibration's "
-                  "ripple map holds and no more, so it is wrong by whatever changed since "
-                  "calibration, and a gear torque the inertial model misses (a resonance) is "
-                  "taken for ripple",
+                  "transmission-error torque: on the built-in calibration, which turns at many "
+                  "speeds, that changes the map little, so it keeps no more of the gear's torque "
+                  "than the frozen map and is wrong by whatever changed since calibration",
+    "gear-keeping": "angle-adaptive's map, fitted and learned beside an encoder model of the gear's "
+                    "dynamic torque (speed squared and acceleration, zero at rest) whose prediction "
+                    "its learning takes out and its estimate keeps, and learned only up to the "
+                    "calibration's top speed: it follows drift where it learns, holds its map where "
+                    "the joint turns faster than the calibration did, so a ripple changed since "
+                    "calibration (re-assembly) is re-learned only at lower speeds, and a gear torque "
+                    "its model misses (a resonance) still reaches its learning",
     "spatial-filter": "band-passes at orders 2, 4, 8 stepped in angle: they need no map, so drift, "
                       "re-assembly and power cycles pass them by, but they fade out at rest and at "
                       "low speed (the ripple stays there) and take the part of every torque change "
@@ -54,6 +61,11 @@ MECHANISMS = {
                    "harmonics and leaks into the weights, which then hold it at rest; it runs in the "
                    "wrong frame until the first index pulse after a power cycle, and cannot follow "
                    "orders it does not list or components locked to the output",
+    "gain-tuned": "per-channel gains tuned on the calibration log to null what the gauges' placement "
+                  "leaves at the wave-generator orders: with one bridge there is nothing to tune and it is "
+                  "its inner method (raw); with several channels it cannot tell that ripple from real "
+                  "torque the calibration's reference misses at the same orders, and it holds the "
+                  "calibration's gains through whatever changes the gauges since (re-assembly)",
     "periodic-dob": "a comb over one turn of the encoder angle, any ripple shape, learned on the "
                     "strain minus a low-passed torque: it holds at rest and needs no order list, but "
                     "learns slowly (the load dependence and a changed ripple take many turns), "
@@ -77,13 +89,13 @@ def method_verdicts(frame, column: str = "rms_error_nm", reference: str = "same-
         rows = table[table["method"] == method].set_index("condition")
         best, worst = rows["mean"].idxmin(), rows["mean"].idxmax()
         wins = [c for c in rows.index if rows.loc[c, "rank"] == 1]
-        text = f"`{method}`: " + (f"lowest mean under {', '.join(f'`{c}`' for c in wins)}; " if wins else "")
+        text = f"{code(method)}: " + (f"lowest mean under {', '.join(code(c) for c in wins)}; " if wins else "")
         if len(rows) == 1:   # one condition: where it ranks there
-            text += (f"rank {rows.loc[best, 'rank']} of {n_methods[best]} under `{best}` "
+            text += (f"rank {rows.loc[best, 'rank']} of {n_methods[best]} under {code(best)} "
                      f"({fmt_interval(rows.loc[best, 'mean'], rows.loc[best, 'half'])})")
         else:
-            text += (f"best under `{best}` ({fmt_interval(rows.loc[best, 'mean'], rows.loc[best, 'half'])}, "
-                     f"rank {rows.loc[best, 'rank']} of {n_methods[best]}), worst under `{worst}` "
+            text += (f"best under {code(best)} ({fmt_interval(rows.loc[best, 'mean'], rows.loc[best, 'half'])}, "
+                     f"rank {rows.loc[best, 'rank']} of {n_methods[best]}), worst under {code(worst)} "
                      f"({fmt_interval(rows.loc[worst, 'mean'], rows.loc[worst, 'half'])}, rank "
                      f"{rows.loc[worst, 'rank']} of {n_methods[worst]})")
         if reference in rows.index and mismatch in rows.index:

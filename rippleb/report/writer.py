@@ -1,14 +1,13 @@
 """``rippleb report``: the comparison of a run, generated from its ``results.csv``.
 
-``rippleb report DIR [--out OUT] [--published] [--html]`` writes ``README.md`` (the
-method x condition summary and headline, then per condition the method x scenario
-matrices as mean and 95 % t-interval over seeds, the timing table, a ranking per scenario
-and the paper's Table I replica; the rows that did not finish ok; provenance), every row
-as ``results.csv``, ``provenance.json``, the figures of :mod:`rippleb.report.figures` and, with
-``--html``, the interactive ``index.html`` of :mod:`rippleb.report.html_report`.
-
-Tables live in :mod:`rippleb.report.tables`, statistics in :mod:`rippleb.report.stats`, provenance in
-:mod:`rippleb.report.provenance`; this module reads the rows and writes the files. The names
+``rippleb report DIR [--out OUT] [--published] [--html]`` writes ``README.md`` (the method x
+condition summary and headline, the gauge layouts of a layout sweep, then per condition the
+method x scenario matrices as mean and 95 % t-interval over seeds, the timing table, a ranking
+per scenario and the paper's Table I replica; the rows that did not finish ok; provenance),
+every row as ``results.csv``, ``provenance.json``, the figures of :mod:`rippleb.report.figures`
+and, with ``--html``, the interactive ``index.html`` of :mod:`rippleb.report.html_report`.
+Tables live in :mod:`rippleb.report.tables`, statistics in :mod:`rippleb.report.stats`, provenance
+in :mod:`rippleb.report.provenance`; this module reads the rows and writes the files. The names
 used by earlier versions of this module are re-exported here.
 """
 
@@ -21,25 +20,25 @@ from pathlib import Path
 import numpy as np
 
 from rippleb.errors import InputError
-from rippleb.files import atomic_path
+from rippleb.files import atomic_path, refuse_links
 from rippleb.report.provenance import (collect_provenance, environment_sentence, environment_warnings, git_state,
-                                provenance_markdown,  # noqa: F401
-                                read_run_provenance, seeds_text)
-from rippleb.metrics import METRIC_COLUMNS
-from rippleb.truthfree import TRUTH_FREE_COLUMNS
+                                       provenance_markdown,  # noqa: F401
+                                       read_run_provenance, seeds_text)
+from rippleb.scoring.metrics import METRIC_COLUMNS
+from rippleb.scoring.truthfree import TRUTH_FREE_COLUMNS
 from rippleb.engine.results import RunWarning, copy_rows, row_key, swept_columns
 from rippleb.engine.sealing import sealed_text
-from rippleb.report.sections import READING_RECORDED, READING_SIMULATED, conditions_note, gear_section, verdicts_section
+from rippleb.report.sections import READING_RECORDED, READING_SIMULATED, conditions_note, summary_sections
 from rippleb.report.tuning_table import tuning_markdown
 from rippleb.report.stats import (CONFIDENCE, METHOD_ORDER, fmt_interval, interval_frame,  # noqa: F401
-                           method_order, scenario_order, t_interval, with_condition)
+                                  method_order, scenario_order, t_interval, with_condition)
 from rippleb.report.table_one import (PAPER_CITATION, PAPER_TABLE_I, TABLE_I_METHODS,  # noqa: F401
-                               TABLE_I_SCENARIO, table_one, table_one_markdown)
+                                      TABLE_I_SCENARIO, table_one, table_one_markdown)
 from rippleb.report.tables import (ACCURACY_COLUMNS, MATRIX_COLUMNS, by_condition,  # noqa: F401
-                            counts_sentence, is_recorded, title_lines,
-                            condition_headline, condition_summary, condition_summary_markdown,
-                            failed_markdown, headline_sentences, matrix_markdown, plural,
-                            ranking, ranking_markdown, summary_text, timing_markdown, timing_note)
+                                   counts_sentence, is_recorded, title_lines,
+                                   condition_headline, condition_summary, condition_summary_markdown,
+                                   failed_markdown, headline_sentences, matrix_markdown, plural,
+                                   ranking, ranking_markdown, summary_text, timing_markdown, timing_note)
 
 def load_rows(run_dir):
     """The rows of ``run_dir/results.csv`` as a DataFrame; one-line error if there are none."""
@@ -48,7 +47,7 @@ def load_rows(run_dir):
 
     run_dir = Path(run_dir)
     path = run_dir / "results.csv"
-    if not path.is_file():
+    if not (path.is_symlink() or path.exists()):   # a link, a FIFO: the reader says what it is
         raise InputError(f"{run_dir}: no results.csv (is this a rippleb run directory?)")
     results = ResultsFile(None)
     results.rows = verified_rows(run_dir, read_rows(path), path)
@@ -65,7 +64,7 @@ def frame_condition_count(frame) -> int:
 
 
 #: Metrics that no row can hold below zero (``step_latency_ms`` can: an estimate may lead).
-NON_NEGATIVE = tuple(c for c in METRIC_COLUMNS if c not in ("step_latency_ms", "gear_erased_fraction")) + \
+NON_NEGATIVE = tuple(c for c in METRIC_COLUMNS if c not in ("step_latency_ms", "gear_removed_fraction")) + \
     ("ripple_wg_nm", "rest_std_nm")
 
 
@@ -99,13 +98,7 @@ def tables_markdown(frame, joint: dict | None = None) -> str:
 
         return recorded_tables_markdown(frame, joint)
     source = "Recorded" if is_recorded(frame) else "Simulated"
-    parts = ["## Method x condition (mean `rms_error_nm` over the scenarios, 95 % interval)", "",
-             "Per seed (device), the mean RMS error over the scenarios every method finished under "
-             "that condition; then mean ± 95 % t-interval over seeds.", "",
-             condition_summary_markdown(frame), ""]
-    parts += [f"- {s}" for s in condition_headline(frame)] + [""]
-    parts += gear_section(frame)
-    parts += verdicts_section(frame)
+    parts = summary_sections(frame)
     for condition, rows in by_condition(frame):
         parts += _condition_section(condition, rows, source)
     parts += ["## Rows that did not finish ok", "", failed_markdown(frame)]
@@ -115,17 +108,21 @@ def tables_markdown(frame, joint: dict | None = None) -> str:
 def _condition_section(condition: str, rows, source: str) -> list[str]:
     from rippleb.simulator.conditions import CONDITIONS
 
+    from rippleb.printable import markdown_code, markdown_text
+
     what = CONDITIONS.get(condition, "not a built-in condition")
-    parts = [f"## Condition `{condition}`: {what}", ""]
+    parts = [f"## Condition {markdown_code(condition)}: {what}", ""]
     parts += [f"- {s}" for s in headline_sentences(rows)] + [""]
     for column, (title, unit) in MATRIX_COLUMNS.items():
         if column in rows and rows[column].notna().any():  # older rows, or n/a everywhere
-            parts += [f"### `{column}`: {title} [{unit}] ({condition})", "", matrix_markdown(rows, column), ""]
+            parts += [f"### `{column}`: {title} [{unit}] ({markdown_text(condition)})", "",
+                      matrix_markdown(rows, column), ""]
     if "us_per_tick_p99" in rows:
-        parts += [f"### Compute time of one control tick, p50 / p99 [us] ({condition})", "",
+        parts += [f"### Compute time of one control tick, p50 / p99 [us] ({markdown_text(condition)})", "",
                   timing_markdown(rows), ""]
-    parts += [f"### Ranking per scenario by `rms_error_nm` ({condition})", "", ranking_markdown(rows), ""]
-    parts += [f"### The paper's Table I, replicated ({condition})", "", table_one_markdown(rows, source), ""]
+    parts += [f"### Ranking per scenario by `rms_error_nm` ({markdown_text(condition)})", "", ranking_markdown(rows), ""]
+    parts += [f"### The paper's Table I, replicated ({markdown_text(condition)})", "",
+              table_one_markdown(rows, source), ""]
     return parts
 
 
@@ -247,8 +244,11 @@ def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, arg
     """
     run_dir = Path(run_dir)
     frame = load_rows(run_dir)
+    if out is None:   # the run directory's own entry: never a link (one to elsewhere would take the report there)
+        refuse_links(run_dir, ["report"])
     out = Path(out) if out is not None else run_dir / "report"
     _mkdir(out)
+    refuse_links(out, REPORT_ENTRIES, also_in="figures")
     try:
         return _write_report(run_dir, out, frame, figures=figures, figure_seed=figure_seed, argv=argv,
                              published=published, html=html, figure_format=figure_format,
@@ -301,6 +301,10 @@ def _write_report(run_dir: Path, out: Path, frame, *, figures, figure_seed, argv
                           signals=signals)
     return {"readme": out / "README.md", "csv": out / "results.csv", "provenance": out / "provenance.json",
             "html": page, "figures": {k: v[0] for k, v in drawn.items()}, "warnings": warnings}
+
+
+#: What ``rippleb report`` writes in its directory; none may be a symbolic link (nor anything in figures/).
+REPORT_ENTRIES = ("README.md", "results.csv", "provenance.json", "index.html", "figures")
 
 
 def _mkdir(path: Path) -> None:

@@ -33,7 +33,8 @@ CONDITIONS = {
     "re-assembled": "flexspline re-mounted or drive swapped: gauge errors (ripple, gain) redrawn",
     "realistic": "same session, but the joint has the physics no method models (gauge dynamics, "
                  "non-affine, flank- and load-history-dependent ripple, ripple at orders no method "
-                 "models, span drift, DAQ chain, encoder errors; today's position loop), in its "
+                 "models, span drift, DAQ chain, encoder errors, the gear's angle-locked torque beyond "
+                 "its error; today's position loop), in its "
                  "calibration log too",
 }
 DEFAULT_CONDITION = "same-session"
@@ -99,12 +100,16 @@ class Session:
         continues the calibration session's (absolute) count.
     realistic
         The unset knobs of :mod:`rippleb.mismatch` take their documented magnitudes.
+    rebonded
+        The gauges' installation errors are drawn anew (``re-assembled``;
+        :mod:`rippleb.simulator.flexspline`).
     """
 
     device: object
     temperature_c: float
     counter_start: int | None = None
     realistic: bool = False
+    rebonded: bool = False
 
 
 def session(device, scenario, condition: str) -> Session:
@@ -130,7 +135,7 @@ def session(device, scenario, condition: str) -> Session:
                        counter_start=start)
     if condition == "aged":
         return dataclasses.replace(same, device=aged(device, scenario.ripple.drift))
-    return dataclasses.replace(same, device=re_assembled(device))
+    return dataclasses.replace(same, device=re_assembled(device), rebonded=True)
 
 
 def aged(device, drift: float = 1.0):

@@ -119,14 +119,15 @@ def motor_params(device, temperature_c: float, spec: JointSpec, encoder=None,
 
 
 def loop_params(spec: JointSpec, gains: Gains, table: LoadTable, *, controller=True, friction=True,
-                clamp_motor=False, substeps=SUBSTEPS) -> dict:
-    """Controller, table grid and switches as integrator parameters."""
+                clamp_motor=False, substeps=SUBSTEPS, damping=0.0) -> dict:
+    """Controller, table grid, the drive's structural damping ``damping`` [Nm s/rad] and
+    switches as integrator parameters."""
     tick = 1.0 / spec.control_rate
     return dict(dt=1.0 / spec.fs, substeps=substeps, block=spec.block_size, kp=gains.kp, kd=gains.kd,
                 current_limit=CURRENT_LIMIT,
                 velocity_filter=1.0 - np.exp(-VELOCITY_FILTER_FACTOR * gains.bandwidth * tick),
                 table_start=table.angle[0], table_step=table.angle[1] - table.angle[0],
-                controller=controller, friction=friction, clamp_motor=clamp_motor)
+                controller=controller, friction=friction, clamp_motor=clamp_motor, damping=damping)
 
 
 def table_rows(table: LoadTable) -> np.ndarray:
@@ -156,7 +157,8 @@ def initial_state(spec: JointSpec, gains: Gains, table: LoadTable, q_d0: float, 
     for _ in range(3):
         tau = float(np.interp(q, table.angle, table.gravity)) + external0
         theta = theta_ref0 - (tau / N - torque_ff0) / gains.kp
-        q = (theta - encoder_zero) / N + float(gear.error(theta, N)) - float(joint.twist(tau))
+        q = ((theta - encoder_zero) / N + float(gear.error(theta, N, tau))
+             - float(gear.compliance_scale(theta)) * float(joint.twist(tau)))
     return np.array([q, qd_d0, theta, N * qd_d0, tau])
 
 

@@ -9,10 +9,13 @@ drives the motor is :mod:`rippleb.simulator.controller`.
 The joint (``docs/physics.md``, "Joint dynamics and position controller")::
 
     link:          M(q) q'' + h(q) q'^2 + G(q) + F_out(q') + tau_ext(t) = tau_s
-    transmission:  tau_s = twist^-1(theta_m / N + e(theta_m) - q)
-    motor:         J_m theta_m'' = K_t i - tau_s (1/N + e'(theta_m)) - F_m(theta_m', tau_s, theta_m) - cogging(theta_m)
+    transmission:  tau_s = twist^-1(d / s(theta_m)) + c d',   d = theta_m / N + e(theta_m, tau_s) - q
+    motor:         J_m theta_m'' = K_t i - tau_s (1/N + de/dtheta_m) + s'(theta_m) W*(tau) - F_m(theta_m', tau_s, theta_m) - cogging(theta_m)
 
-``e`` is the gear's transmission error (:mod:`rippleb.simulator.transmission`).
+``e`` is the gear's transmission error, ``s`` the flexspline's compliance varying over the
+wave-generator angle and ``c`` the drive's structural damping
+(:mod:`rippleb.simulator.transmission`); ``W*(tau) = tau twist(tau) - E(tau)`` is the
+spring's complementary energy, whose change with ``s`` the motor feels (virtual work).
 
 :func:`integrate` advances it on the DAQ grid with semi-implicit (symplectic) Euler
 substeps; both frictions are taken implicitly (a scalar safeguarded Newton solve per
@@ -99,11 +102,12 @@ PARAMS = ("dt", "substeps", "block", "gear_ratio", "rotor_inertia", "torque_cons
           "out_coulomb", "out_viscous", "out_smoothing",
           "table_start", "table_step", "encoder_zero", "controller", "friction", "clamp_motor",
           "encoder_errors", "edge0", "edge1", "edge2", "edge3", "eccentricity", "eccentricity_phase",
-          "te2", "te2_phase", "te1", "te1_phase", "te_out", "te_out_phase")
+          "te2", "te2_phase", "te1", "te1_phase", "te_out", "te_out_phase", "te4", "te4_phase",
+          "te_load", "compliance", "compliance_phase", "damping")
 (DT, SUBSTEPS, BLOCK, GEAR, JM, KT, KP, KD, IMAX, CPR, VFILT, FC, FS, WS, FV, MU, R1, R2, PH1, PH2,
  CSCALE, VSCALE, EPS, COG, COGORD, COGPH, OC, OV, OEPS, TSTART, TSTEP, ZERO, CTRL, FRIC,
  CLAMP, ENCERR, EDGE0, EDGE1, EDGE2, EDGE3, ECC, ECCPH,
- TE2, TE2PH, TE1, TE1PH, TEO, TEOPH) = range(len(PARAMS))
+ TE2, TE2PH, TE1, TE1PH, TEO, TEOPH, TE4, TE4PH, TELOAD, COMPL, COMPLPH, DAMP) = range(len(PARAMS))
 #: Rows of the integrator's output: joint angle and velocity, motor angle and velocity,
 #: transmitted (shaft) torque and commanded current.
 STATE = ("q", "qd", "theta_m", "w_m", "tau_s", "current")
@@ -119,16 +123,35 @@ def pack_params(**values) -> np.ndarray:
     return np.array([float(values[name]) for name in PARAMS])
 
 
-@compiled(types.UniTuple(types.float64, 2)(IN_F8, types.float64))
-def transmission(P, th):
-    """The gear's transmission error ``e`` [rad] at wave-generator angle ``th`` and its
-    slope ``de/dth`` (:class:`rippleb.simulator.transmission.TransmissionError`)."""
+@compiled(types.UniTuple(types.float64, 2)(IN_F8, types.float64, types.float64))
+def transmission(P, th, tau):
+    """The gear's transmission error ``e`` [rad] at wave-generator angle ``th`` under the
+    shaft torque ``tau`` [Nm], and its slope ``de/dth``
+    (:class:`rippleb.simulator.transmission.TransmissionError`): the order-2 amplitude grows
+    by ``P[TELOAD]`` per Nm of ``|tau|``."""
     out_angle = th / P[GEAR]
-    e = (P[TE2] * math.cos(2.0 * th + P[TE2PH]) + P[TE1] * math.cos(th + P[TE1PH])
-         + P[TEO] * math.cos(out_angle + P[TEOPH]))
-    slope = -(2.0 * P[TE2] * math.sin(2.0 * th + P[TE2PH]) + P[TE1] * math.sin(th + P[TE1PH])
-              + P[TEO] / P[GEAR] * math.sin(out_angle + P[TEOPH]))
+    a2 = P[TE2] * (1.0 + P[TELOAD] * abs(tau))
+    e = (a2 * math.cos(2.0 * th + P[TE2PH]) + P[TE1] * math.cos(th + P[TE1PH])
+         + P[TEO] * math.cos(out_angle + P[TEOPH]) + P[TE4] * math.cos(4.0 * th + P[TE4PH]))
+    slope = -(2.0 * a2 * math.sin(2.0 * th + P[TE2PH]) + P[TE1] * math.sin(th + P[TE1PH])
+              + P[TEO] / P[GEAR] * math.sin(out_angle + P[TEOPH]) + 4.0 * P[TE4] * math.sin(4.0 * th + P[TE4PH]))
     return e, slope
+
+
+@compiled(types.UniTuple(types.float64, 2)(IN_F8, types.float64))
+def compliance(P, th):
+    """The flexspline's compliance factor ``s`` at wave-generator angle ``th`` (the drive
+    twists ``s twist(tau)`` under ``tau``) and its slope ``ds/dth``."""
+    angle = 2.0 * th + P[COMPLPH]
+    return 1.0 + P[COMPL] * math.cos(angle), -2.0 * P[COMPL] * math.sin(angle)
+
+
+@compiled(types.float64(types.float64))
+def complementary_energy(tau):
+    """``tau twist(tau) - E(tau)`` [J]: the spring's complementary energy at ``tau``."""
+    x = abs(tau) / STIFFNESS_KNEE     # log cosh x = x + log1p(exp(-2x)) - log 2, without overflow
+    return tau * tau / (2.0 * STIFFNESS_HIGH) + _SOFT * STIFFNESS_KNEE ** 2 * (x + math.log1p(math.exp(-2.0 * x))
+                                                                                - math.log(2.0))
 
 
 @compiled(types.float64(IN_F8, types.float64, types.float64))
@@ -247,7 +270,7 @@ def integrate(P, table, inputs, state0, out):
     encoder count of the motor angle, and its current is held until the next tick.
     """
     n = out.shape[1]
-    q, qd, th, w, tau = state0[0], state0[1], state0[2], state0[3], state0[4]
+    q, qd, th, w, spring = state0[0], state0[1], state0[2], state0[3], state0[4]
     N, Jm = P[GEAR], P[JM]
     sub = max(1, int(P[SUBSTEPS]))
     h = P[DT] / sub
@@ -260,23 +283,24 @@ def integrate(P, table, inputs, state0, out):
     last_angle = encoder_count(P, th, step_angle) * step_angle
     zero = P[ZERO]
     for k in range(n):
-        e, slope = transmission(P, th)
-        tau = torque_of_twist((th - zero) / N + e - q, tau)
-        if P[CTRL] != 0.0 and k % block == 0:
-            angle = encoder_count(P, th, step_angle) * step_angle     # what the encoder counts
-            if k > 0:
-                w_filtered += P[VFILT] * ((angle - last_angle) / tick - w_filtered)
-            last_angle = angle
-            torque = (inputs[3, k] + P[KP] * (inputs[1, k] - angle) + P[KD] * (inputs[2, k] - w_filtered))
-            current = min(max(torque / P[KT], -P[IMAX]), P[IMAX])
-        out[0, k], out[1, k], out[2, k], out[3, k], out[4, k], out[5, k] = q, qd, th, w, tau, current
-        external = inputs[0, k]
         for s in range(sub):
-            if s:
-                e, slope = transmission(P, th)
-                tau = torque_of_twist((th - zero) / N + e - q, tau)
+            # the shaft torque from the positions (the spring, its compliance at this angle)
+            # and the deflection's rate (the drive's structural damping)
+            e, slope = transmission(P, th, spring)
+            scale, scale_slope = compliance(P, th)
+            spring = torque_of_twist(((th - zero) / N + e - q) / scale, spring)
+            tau = spring + P[DAMP] * (w / N + slope * w - qd)
+            if s == 0:
+                if P[CTRL] != 0.0 and k % block == 0:
+                    angle = encoder_count(P, th, step_angle) * step_angle     # what the encoder counts
+                    if k > 0:
+                        w_filtered += P[VFILT] * ((angle - last_angle) / tick - w_filtered)
+                    last_angle = angle
+                    torque = (inputs[3, k] + P[KP] * (inputs[1, k] - angle) + P[KD] * (inputs[2, k] - w_filtered))
+                    current = min(max(torque / P[KT], -P[IMAX]), P[IMAX])
+                out[0, k], out[1, k], out[2, k], out[3, k], out[4, k], out[5, k] = q, qd, th, w, tau, current
             M, hq, G = _load(table, P, q)
-            link_force = tau - hq * qd * qd - G - external
+            link_force = tau - hq * qd * qd - G - inputs[0, k]
             if friction_on:
                 qd = _implicit_velocity(M / h, qd, link_force, P, 1.0, tau, False)
             else:
@@ -285,10 +309,13 @@ def integrate(P, table, inputs, state0, out):
                 w = 0.0
             else:
                 # the shaft torque reaches the rotor through the same kinematics (virtual
-                # work): tau d(twist)/d(theta_m) = tau (1/N + e')
+                # work): tau d(twist)/d(theta_m) = tau (1/N + e'), and a compliance that
+                # varies with the angle adds s' W*(tau)
                 # (tau / N + tau e', not tau (1/N + e'): an ideal gear keeps its last bits)
                 motor_force = (P[KT] * current - tau / N - tau * slope
                                - P[COG] * math.cos(P[COGORD] * th + P[COGPH]))
+                if scale_slope != 0.0:
+                    motor_force += scale_slope * complementary_energy(spring)
                 if friction_on:
                     w = _implicit_velocity(Jm / h, w, motor_force, P, motor_coulomb_scale(P, th, tau), tau, True)
                 else:

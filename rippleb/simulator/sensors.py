@@ -13,6 +13,7 @@ import numpy as np
 from rippleb.scenario import REFERENCE_TEMPERATURE_C, Scenario
 from rippleb.mismatch import Unmodelled
 from rippleb.simulator import daq, gauge
+from rippleb.simulator.conditions import stream
 from rippleb.simulator.device import Device
 from rippleb.simulator.ripple import bridge_ripple
 
@@ -61,6 +62,25 @@ def strain_bridge(device: Device, sc: Scenario, t, theta_m, tau, noise, output_a
         volts = volts + sc.faults.bridge_drift * t
     # fault: a lower full scale (amplifier gain set too high) clips the peaks
     return quantise(volts, sc.faults.strain_full_scale or STRAIN_RANGE, knobs.adc_bits)
+
+
+def gauge_channels(devices, sc: Scenario, t, theta_m, tau, noise, output_angle,
+                   knobs: Unmodelled = IDEAL) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(strain, channels)`` [V]: the bridge of each channel of the scenario's gauge layout
+    through :func:`strain_bridge`, ``devices`` the device each channel reads
+    (:func:`rippleb.simulator.flexspline.channel_devices`), and their mean as the ``strain``
+    column; ``channels`` (samples x channels) only for a layout with several.
+
+    The first channel's noise comes from the log's ``noise`` generator (so a one-channel
+    layout draws what the one bridge always drew), each further channel's from its own
+    stream: the current's noise, drawn after, is the same whatever the layout.
+    """
+    noises = [noise] + [stream(d.seed, sc.name, "gauge-channel", str(c)) for c, d in enumerate(devices) if c]
+    volts = [strain_bridge(d, sc, t, theta_m, tau, rng, output_angle, knobs) for d, rng in zip(devices, noises)]
+    if len(volts) == 1:
+        return volts[0], None
+    channels = np.column_stack(volts)
+    return channels.mean(axis=1), channels
 
 
 def current_sense(sc: Scenario, commanded: np.ndarray, offset: float, noise) -> np.ndarray:

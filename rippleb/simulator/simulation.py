@@ -28,15 +28,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from rippleb.data import JointSpec, SensorLog
+from rippleb.layouts import GaugeSettings
 from rippleb.scenario import Scenario, load_scenario
 from rippleb.simulator import conditions, controller
 from rippleb.mismatch import describe
 from rippleb.simulator.conditions import DEFAULT_CONDITION, calibration_condition, check_condition, stable_hash
 from rippleb.simulator.device import Device, check_seed
+from rippleb.simulator.flexspline import channel_devices
 from rippleb.simulator.encoder import EncoderErrors, counts, missed_counts
 from rippleb.simulator.joint import load_table
-from rippleb.simulator.sensors import current_sense, dropouts, encoder_faults, strain_bridge
-from rippleb.simulator.transmission import IDEAL as IDEAL_GEAR, TransmissionError
+from rippleb.simulator.sensors import current_sense, dropouts, encoder_faults, gauge_channels
+from rippleb.simulator.transmission import IDEAL as IDEAL_GEAR, TransmissionError, structural_damping
 
 
 @dataclass(frozen=True, eq=False)
@@ -62,9 +64,14 @@ class Simulation:
     gear
         The drive's transmission error (:mod:`rippleb.simulator.transmission`).
     torque_gear
-        What that error adds to ``torque_true`` [Nm]: the real torque of this joint minus
-        that of the same joint with an ideal gear (zero when the error is off; None for an
-        unscored session, the calibration, where no row is scored).
+        What that error adds to ``torque_true`` [Nm]: :func:`gear_torque`, the real torque
+        of this joint minus that of the same joint with an ideal gear, both read through a
+        fine encoder (zero when the error is off; None for an unscored session, the
+        calibration, where no row is scored).
+    gauges
+        Per amplifier channel of the gauge layout, the device as that channel reads it (its
+        ripple terms are the channel's; :mod:`rippleb.simulator.flexspline`): ``gauges[0]``
+        is the bridge of a one-channel layout.
     """
 
     log: SensorLog
@@ -76,6 +83,7 @@ class Simulation:
     device: Device
     gear: TransmissionError = IDEAL_GEAR
     torque_gear: np.ndarray | None = None
+    gauges: tuple = ()
 
 
 def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_CONDITION) -> Simulation:
@@ -109,25 +117,26 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     knobs = sc.unmodelled.resolve(realistic=session.realistic)
     errors = EncoderErrors.draw(seed, knobs, spec.counts_per_rev)
     gains = controller.design_gains(spec, float(np.mean(nominal.inertia)), knobs.bandwidth_factor)
-    gear = TransmissionError.draw(seed, sc.transmission_error)
+    gear = TransmissionError.draw(seed, sc.transmission_error, sc.order2_share, order4=knobs.order4_error,
+                                  load=knobs.load_error, compliance=knobs.compliance_variation,
+                                  rated_torque=spec.rated_torque)
     table = load_table(sc, q_d)
     loop = (spec, device, sc.temperature_c, table, gains, t, trajectory, tau_ref - _excitation(sc, t),
             sc.external_torque(t))
-    q, qd, theta_m, _, tau_true, commanded = controller.run(*loop, encoder=errors, gear=gear)
-    # What the gear's error adds to the real torque (the metrics' "erased" columns; never
-    # streamed to a method): this joint against the same joint with an ideal gear, each
-    # under its own loop (docs/metrics.md, "What a method erased", says what else the
-    # difference holds: the loop's response to the error, and encoder-edge jitter). Only
-    # for a scored session: no row is scored on the calibration log, and its twin run
-    # would be the longest integration of every case.
+    drive = dict(encoder=errors, damping=structural_damping(knobs.loss_factor, table))
+    q, qd, theta_m, _, tau_true, commanded = controller.run(*loop, gear=gear, **drive)
+    # What the gear's error adds to the real torque (the metrics' gear columns; never
+    # streamed to a method). Only for a scored session: no row is scored on the
+    # calibration log, and its twin runs would be the longest integrations of every case.
     if not sc.scored:
         torque_gear = None
     elif gear.active:
-        torque_gear = tau_true - controller.run(*loop, encoder=errors)[4]
+        torque_gear = gear_torque(loop, gear, **drive)
     else:
         torque_gear = np.zeros(n)
 
-    strain = strain_bridge(device, sc, t, theta_m, tau_true, noise, output_angle=q, knobs=knobs)
+    gauges = tuple(channel_devices(device, sc.gauges, sc.temperature_c, session.rebonded))
+    strain, channels = gauge_channels(gauges, sc, t, theta_m, tau_true, noise, output_angle=q, knobs=knobs)
     current = current_sense(sc, commanded, device.current_offset, noise)
     absolute = counts(theta_m, spec.counts_per_rev, errors)
     index = conditions.index_pulses(absolute, conditions.index_count(seed, spec.counts_per_rev),
@@ -141,22 +150,51 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
             "condition": condition if sc.scored else calibration_condition(condition)}
     if knobs.active:
         meta["unmodelled"] = describe(knobs)
+    if sc.gauges != GaugeSettings():
+        meta["gauges"] = dataclasses.asdict(sc.gauges)
     if sc.faults.active:
         # Own generator: a faulty scenario's healthy signals stay those of the same
         # scenario without faults, and scenarios without faults are untouched.
         fault_rng = np.random.default_rng(
             np.random.SeedSequence([seed, stable_hash(sc.name), stable_hash("faults")]))
         encoder = encoder_faults(encoder, sc.faults, spec.fs, fault_rng)
-        strain, encoder, current, index = dropouts((strain, encoder, current, index), sc.faults,
-                                                    spec.fs, fault_rng)
+        levels = (strain, encoder, current) if channels is None else (strain, encoder, current, channels)
+        strain, encoder, current, *kept, index = dropouts((*levels, index), sc.faults, spec.fs, fault_rng)
+        channels = kept[0] if kept else None
         meta["faults"] = {k: v for k, v in dataclasses.asdict(sc.faults).items() if v}
 
     log = SensorLog(spec=spec, t=t, strain=strain, encoder=encoder, current=current, index=index,
-                    torque_true=tau_true, torque_ref=tau_ref, meta=meta)
+                    channels=channels, torque_true=tau_true, torque_ref=tau_ref, meta=meta)
     start, stop = sc.evaluation
     return Simulation(log=log, moving=np.abs(qd_d) > 1e-12, wave_angle=theta_m,
                       joint_velocity=qd, eval_mask=(t >= start) & (t <= stop),
-                      scenario=sc, device=device, gear=gear, torque_gear=torque_gear)
+                      scenario=sc, device=device, gear=gear, torque_gear=torque_gear, gauges=gauges)
+
+
+#: Encoder counts per motor revolution of the pair :func:`gear_torque` compares: so fine
+#: that no count edge moves by a measurable time when the gear's error moves the motor
+#: (the integrator reads ``floor(theta / step) step``; at 2**40 counts the step is 6e-12
+#: rad, and motor angles up to 1e3 rad stay below 2**53 steps, exact in a double).
+FINE_COUNTS_PER_REV = 2**40
+
+
+def gear_torque(loop: tuple, gear: TransmissionError, **drive) -> np.ndarray:
+    """The real torque [Nm] the gear's transmission error adds: the joint with ``gear``
+    minus the same joint with an ideal gear, both under their own loop read through an
+    encoder of :data:`FINE_COUNTS_PER_REV` counts (``loop``: :func:`controller.run`'s
+    arguments before the drive's, ``drive`` the rest of the drive as :func:`controller.run`
+    takes it: the encoder's errors and the structural damping).
+
+    Not the logged joint minus its ideal-gear twin: both read the 2500-count encoder, and
+    any change of the motion, however small, moves their count edges and current steps
+    differently, a jitter of 0.08-0.21 Nm RMS that stays when the error is scaled down
+    1e5 times (docs/physics.md, "Transmission error"). With the fine encoder the
+    difference is the loop's smooth response to the error, proportional to it at small
+    sizes (``tests/test_transmission.py``); the logged joint's own count-edge torque,
+    which is there with any gear, stays in ``torque_true - torque_gear``.
+    """
+    fine = (dataclasses.replace(loop[0], counts_per_rev=FINE_COUNTS_PER_REV),) + tuple(loop[1:])
+    return controller.run(*fine, gear=gear, **drive)[4] - controller.run(*fine, **drive)[4]
 
 
 def _excitation(sc: Scenario, t: np.ndarray) -> np.ndarray:

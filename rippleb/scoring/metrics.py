@@ -5,7 +5,7 @@ Notation: ``e[n] = y[n] - tau[n]`` is the estimate ``y`` minus the truth ``tau``
 their count. Each metric is NaN where it is undefined (no truth column, no restart, no
 rest in the window, no distinct correlation peak, no torque step or chirp in the
 scenario). ``docs/metrics.md`` repeats these formulas. The two columns of the dynamic
-response, ``step_latency_ms`` and ``bandwidth_hz``, are computed in :mod:`rippleb.response`.
+response, ``step_latency_ms`` and ``bandwidth_hz``, are computed in :mod:`rippleb.scoring.response`.
 """
 
 from __future__ import annotations
@@ -18,15 +18,19 @@ import numpy as np
 from scipy.fft import next_fast_len
 
 from rippleb.data import MAX_TORQUE_FACTOR
-from rippleb.response import (BAND_FRACTION, BAND_MIN_BINS, BAND_STEP, HALF_POWER,  # noqa: F401 - re-exported
-                              STEP_BASELINE_S, STEP_HORIZON_S, STEP_MAX_RISE_S, bandwidth_hz, step_latency_ms)
+from rippleb.scoring.response import (BAND_FRACTION, BAND_MIN_BINS, BAND_STEP, HALF_POWER,  # noqa: F401 - re-exported
+                                      STEP_BASELINE_S, STEP_HORIZON_S, STEP_MAX_RISE_S, bandwidth_hz, step_latency_ms)
 
 MAX_DELAY_S = 0.100
 RESTART_ANGLE_RAD = 4.0 * np.pi   # two wave-generator revolutions
 REST_HOLD_S = 0.010               # recorded logs: no encoder count for 10 ms is "at rest"
 DELAY_PEAK_FACTOR = 2.0           # delay_ms: lags whose misfit 1 - r is within 2x the best ...
 DELAY_PEAK_WIDTH_S = 0.025        # ... must all lie within 25 ms of it, else the peak is not distinct
-GEAR_TORQUE_FLOOR_NM = 1e-6      # gear_erased_fraction: below this RMS there is nothing to erase
+#: gear_removed_fraction is NaN where the gear's torque is below this RMS [Nm]: the ripple a
+#: method removes at orders 1 and 2 (0.1-1 Nm) projects onto g by its ratio to g, and on
+#: creep and static-contact (g 0.009-0.044 Nm RMS on devices 2000-2009) moved the share
+#: of the angle-map methods by up to +-5; the moving scenarios carry 0.22-0.84 Nm.
+GEAR_TORQUE_FLOOR_NM = 0.1
 
 _MEMO: dict[int, dict] = {}       # id of a live Truth -> what Truth.remembered computed for it
 
@@ -43,14 +47,14 @@ class Truth:
     ``steps`` rows ``(start, rise, change)`` [s, s, Nm] of the step loads' edges,
     ``chirps`` rows ``(start, stop, f0, f1)`` [s, s, Hz, Hz] of the chirp loads.
     ``torque_limit`` [Nm], recorded logs only: the largest torque the joint can carry; a row
-    whose estimate goes beyond it is not scored (:mod:`rippleb.scorable`).
-    What the method itself saw, for the truth-free columns (:mod:`rippleb.truthfree`):
+    whose estimate goes beyond it is not scored (:mod:`rippleb.scoring.scorable`).
+    What the method itself saw, for the truth-free columns (:mod:`rippleb.scoring.truthfree`):
     ``strain`` [V] and ``encoder_angle`` [rad], the wave-generator angle from the encoder
     counts (on a simulated log ``wave_angle`` is the true angle, not the encoder's); None
     on a truth built without them.
     ``reference_kind``, recorded logs with a ``torque_ref`` only: what it is (``transducer`` or
     ``model``, :data:`rippleb.joint_file.REFERENCE_KINDS`), which decides how a row is scored
-    against it (:mod:`rippleb.rebuilt`); None for a simulated log, whose ``torque_true`` is known.
+    against it (:mod:`rippleb.scoring.rebuilt`); None for a simulated log, whose ``torque_true`` is known.
     All fields but ``fs``, ``torque_limit`` and the torques are arrays, so a case file stores
     them as such (:data:`TRUTH_ARRAYS`).
     """
@@ -149,21 +153,46 @@ def rms_error(estimate: np.ndarray, truth: np.ndarray | None, mask: np.ndarray) 
     return float(np.sqrt(np.mean(err * err)))
 
 
-def gear_erased(estimate: np.ndarray, truth: np.ndarray | None, gear: np.ndarray | None,
-                mask: np.ndarray) -> float:
-    """The fraction of the gear's real torque ``g`` (``torque_gear``) the estimate removed:
-    ``-sum_W e g / sum_W g^2``, the least-squares share of ``-g`` in the error ``e``.
+def gear_removed(estimate: np.ndarray, strain: np.ndarray | None, gear: np.ndarray | None,
+                 mask: np.ndarray, memo: "Truth | None" = None) -> float:
+    """The share of the gear's real torque ``g`` (``torque_gear``) the method took out of the
+    strain it read: ``-sum_W r g / sum_W g^2``, with ``r = y - (a s + b)`` the part of the
+    estimate ``y`` that no gain ``a`` and offset ``b`` of the strain ``s`` explain (least
+    squares over ``W``).
 
-    0: the estimate carries ``g`` as the joint does; 1: it erased it (its error is ``-g``);
-    it may leave [0, 1] (a method that doubles ``g``, or turns it around). NaN without a
-    gear torque (ideal gear, recording)."""
-    if truth is None or gear is None or not mask.any():
+    0: the estimate passes on what the strain carries of ``g`` (``raw``, a gain and an
+    offset of the strain, scores exactly 0, up to rounding); 1: it took out as much as the
+    gear puts in. What the strain itself lacks of ``g`` (the gauges' hysteresis absorbs
+    small oscillations) is not the method's doing and is not counted. It may leave [0, 1]:
+    ripple a method removes at orders 1 and 2 is locked to the angle ``g`` is locked to,
+    so it projects onto ``g`` with the sign of the device's ripple phase (docs/metrics.md,
+    "What a method erased", measures both). NaN where the gear torque is below
+    :data:`GEAR_TORQUE_FLOOR_NM` RMS (an ideal gear, a joint that barely turns, a
+    recording) or without the strain. ``memo``, the :class:`Truth` that holds ``strain``,
+    ``gear`` and ``mask``, keeps their side for the next estimate.
+    """
+    if strain is None or gear is None or not mask.any():
         return float("nan")
-    g = gear[mask]
+    side = (memo.remembered("gear_removed", lambda: _strain_side(strain, gear, mask)) if memo is not None
+            else _strain_side(strain, gear, mask))
+    if side is None:
+        return float("nan")
+    q, g, power = side
+    y = np.asarray(estimate[mask], float)
+    residual = y - q @ (q.T @ y)
+    return float(-np.dot(residual, g) / power)
+
+
+def _strain_side(strain, gear, mask):
+    """What :func:`gear_removed` needs of the truth alone: an orthonormal basis of the
+    strain's columns ``[s, 1]`` over ``W`` (the projection ``a s + b`` of any estimate is
+    ``q q' y``), ``g`` there and its power; None when ``g`` is below the floor."""
+    g = np.asarray(gear[mask], float)
     power = float(np.dot(g, g))
     if not power > GEAR_TORQUE_FLOOR_NM ** 2 * len(g):
-        return float("nan")
-    return float(-np.dot(estimate[mask] - truth[mask], g) / power)
+        return None
+    s = np.asarray(strain[mask], float)
+    return np.linalg.qr(np.column_stack([s, np.ones(len(s))]))[0], g, power
 
 
 def max_error(estimate: np.ndarray, truth: np.ndarray | None, mask: np.ndarray) -> float:
@@ -287,15 +316,18 @@ def restart_max_error(estimate: np.ndarray, truth: np.ndarray | None, truth_info
     return worst
 
 
-def tick_stats(ticks_ns: np.ndarray, n_samples: int) -> dict[str, float]:
+def tick_stats(ticks_ns: np.ndarray, n_samples: int, method_s: float | None = None) -> dict[str, float]:
     """``us_per_tick_p50``, ``us_per_tick_p99``: percentiles of the ``step`` times [us];
-    ``samples_per_s = n_samples / sum(step times)``.
+    ``samples_per_s``: ``n_samples`` over the method's time on the row as measured outside
+    its process (``method_s``: loading its fitted state, ``reset``, every ``step``, handing
+    back the estimate; :mod:`rippleb.engine.process.keeper`), or, in a process of one's own
+    (tests, tools), over the sum of the step times.
     """
     if len(ticks_ns) == 0:
         return {"us_per_tick_p50": float("nan"), "us_per_tick_p99": float("nan"),
                 "samples_per_s": float("nan")}
     us = ticks_ns / 1000.0
-    total_s = float(np.sum(ticks_ns)) / 1e9
+    total_s = float(np.sum(ticks_ns)) / 1e9 if method_s is None else method_s
     return {"us_per_tick_p50": float(np.percentile(us, 50)),
             "us_per_tick_p99": float(np.percentile(us, 99)),
             "samples_per_s": n_samples / total_s if total_s > 0 else float("inf")}
@@ -324,8 +356,11 @@ def score(estimate: np.ndarray, truth: Truth) -> dict[str, float]:
         # the same for every method of a case: computed once per truth
         "gear_torque_rms_nm": truth.remembered(
             "gear_rms", lambda: rms_error(np.zeros(len(mask)), truth.torque_gear, mask)),
-        "gear_erased_fraction": gear_erased(estimate, truth.torque_true, truth.torque_gear, mask),
+        "gear_removed_fraction": gear_removed(estimate, truth.strain, truth.torque_gear, mask, memo=truth),
         "rms_error_without_gear_nm": rms_error(estimate, _without_gear(truth), mask),
+        # the paper's Table I: "during the motion" (the commanded velocity is not zero)
+        "rms_error_ref_motion_nm": rms_error(estimate, truth.torque_ref, mask & truth.moving),
+        "max_error_ref_motion_nm": max_error(estimate, truth.torque_ref, mask & truth.moving),
     }
 
 
@@ -338,6 +373,10 @@ def _without_gear(truth: Truth) -> np.ndarray | None:
 
 METRIC_COLUMNS = ("rms_error_nm", "max_error_nm", "rms_error_ref_nm", "max_error_ref_nm",
                   "delay_ms", "bandwidth_hz", "step_latency_ms", "restart_max_error_nm",
-                  "stopped_rms_error_nm", "gear_torque_rms_nm", "gear_erased_fraction",
-                  "rms_error_without_gear_nm",
+                  "stopped_rms_error_nm", "gear_torque_rms_nm", "gear_removed_fraction",
+                  "rms_error_without_gear_nm", "rms_error_ref_motion_nm", "max_error_ref_motion_nm",
                   "us_per_tick_p50", "us_per_tick_p99", "samples_per_s")
+#: Columns that came later than the file format: a results file without them still reads
+#: (as n/a). ``gear_removed_fraction`` replaced ``gear_erased_fraction`` (issue 38), which an
+#: older file holds instead and which is read as an extra column.
+LATER_COLUMNS = ("gear_removed_fraction", "rms_error_ref_motion_nm", "max_error_ref_motion_nm")

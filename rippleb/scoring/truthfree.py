@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rippleb.metrics import REST_HOLD_S, Truth, moving_from_encoder
+from rippleb.scoring.metrics import REST_HOLD_S, Truth, moving_from_encoder
 
 #: The orders of the wave-generator angle the paper notches (its Sec. II; the simulator's
 #: dominant ones, rippleb/simulator/gauge.py).
@@ -40,7 +40,7 @@ DELAY_MIN_BINS = 3
 
 
 def encoder_motion(encoder_angle: np.ndarray, fs: float) -> np.ndarray:
-    """Moving where the encoder changed within the last 10 ms (:func:`rippleb.metrics.moving_from_encoder`)."""
+    """Moving where the encoder changed within the last 10 ms (:func:`rippleb.scoring.metrics.moving_from_encoder`)."""
     return moving_from_encoder(encoder_angle, fs)
 
 
@@ -81,7 +81,7 @@ def _monotonic_runs(encoder_angle: np.ndarray, fs: float) -> list[np.ndarray]:
         return []
     direction = np.sign(encoder_angle[edges] - encoder_angle[edges - 1])
     # A new run where the direction flips, or where the joint rested between two changes
-    # (no change for REST_HOLD_S, the rule of rippleb.metrics.moving_from_encoder).
+    # (no change for REST_HOLD_S, the rule of rippleb.scoring.metrics.moving_from_encoder).
     rested = np.diff(edges) > max(1, int(round(REST_HOLD_S * fs)))
     breaks = np.flatnonzero(rested | (direction[1:] != direction[:-1])) + 1
     return [run for run in np.split(edges, breaks) if len(run) > 1]

@@ -6,7 +6,7 @@ own process (its stack frames, ``gc.get_objects()``, the raw heap) would find th
 is scored on. The fork server is forked from the runner when a run starts, before the
 first simulation, so no truth ever exists in it. The runner sends it each job as data
 (:class:`rippleb.engine.jobs.Job`, pickled by the runner: trusted bytes) with the job's two pipe
-ends attached; the server forks a keeper for it (:func:`rippleb.engine.keeper.keeper`, which forks
+ends attached; the server forks a keeper for it (:func:`rippleb.engine.process.keeper.keeper`, which forks
 the worker exactly as before) and replies with the keeper's PID. What a job returns still
 goes straight to the runner through its pipe.
 
@@ -31,7 +31,6 @@ last resort); a keeper's worker dies with it.
 from __future__ import annotations
 
 import contextlib
-import functools
 import os
 import pickle
 import select
@@ -43,7 +42,7 @@ import threading
 import time
 
 from rippleb import interrupts
-from rippleb.engine import isolation
+from rippleb.engine.process import isolation, tasks
 
 _LENGTH = struct.Struct("!Q")
 _PID = struct.Struct("!q")
@@ -139,7 +138,7 @@ class ForkServer:
 
 def _serve(sock: socket.socket, context, preload) -> None:
     """The server's loop: one keeper per request until the runner closes the socket."""
-    from rippleb.engine.keeper import keeper
+    from rippleb.engine.process.keeper import Bound, keeper
 
     isolation.die_with_parent()
     # Ctrl-C reaches the whole foreground process group: the runner handles it (it ends
@@ -153,7 +152,7 @@ def _serve(sock: socket.socket, context, preload) -> None:
             pass
     keepers: set[int] = set()
     while True:
-        keepers.difference_update(isolation.reap_exited())
+        keepers.difference_update(_reaped())
         request = _receive(sock)
         if request is None:
             break
@@ -162,7 +161,7 @@ def _serve(sock: socket.socket, context, preload) -> None:
         if pid == 0:
             sock.close()
             isolation.die_with_parent()  # the server is single-threaded: its death ends the job
-            keeper(functools.partial(job, context), result_w, ctrl_w, memory_mb, output, confine)  # never returns
+            keeper(Bound(job, context, always=True), result_w, ctrl_w, memory_mb, output, confine)  # never returns
         keepers.add(pid)
         os.close(result_w)
         os.close(ctrl_w)
@@ -202,7 +201,7 @@ def _reap_all(keepers: set[int], grace_s: float) -> None:
     """
     deadline = time.monotonic() + grace_s
     while keepers and time.monotonic() < deadline:
-        keepers.difference_update(isolation.reap_exited())
+        keepers.difference_update(_reaped())
         if keepers:
             time.sleep(0.01)
     for pid in keepers:
@@ -211,8 +210,16 @@ def _reap_all(keepers: set[int], grace_s: float) -> None:
                 kill(pid, signal.SIGKILL)
     while True:
         try:
-            os.waitpid(-1, 0)  # every keeper left was killed: each wait returns at once
+            tasks.remove(os.waitpid(-1, 0)[0])  # every keeper left was killed: each wait returns at once
         except ChildProcessError:
             return
         except InterruptedError:
             continue
+
+
+def _reaped() -> list[int]:
+    """The keepers that have exited, reaped, their process groups removed."""
+    pids = isolation.reap_exited()
+    for pid in pids:
+        tasks.remove(pid)
+    return pids

@@ -75,7 +75,7 @@ class JobLog:
         room = max(0, OUTPUT_CAP_BYTES - self.kept)
         if room and self.log_fd is not None:
             with contextlib.suppress(OSError):   # a full disk costs the log, never the row
-                _write_all(self.log_fd, chunk[:room])
+                write_all(self.log_fd, chunk[:room])
         self.kept += min(room, len(chunk))
         self.dropped += len(chunk) - min(room, len(chunk))
 
@@ -87,13 +87,14 @@ class JobLog:
                 note = (f"\nrippleb: this job wrote {self.kept + self.dropped} bytes; its log keeps the first "
                         f"{OUTPUT_CAP_BYTES} ({OUTPUT_CAP_BYTES // 2**20} MiB), {self.dropped} bytes were dropped\n")
                 with contextlib.suppress(OSError):
-                    _write_all(self.log_fd, note.encode())
+                    write_all(self.log_fd, note.encode())
             os.close(self.log_fd)
             self.log_fd = None
         os.close(self.read_fd)
 
 
-def _write_all(fd: int, data: bytes) -> None:
+def write_all(fd: int, data: bytes) -> None:
+    """Write all of ``data`` to ``fd`` (a pipe or a file takes part of it at a time)."""
     view = memoryview(data)
     while view:
         view = view[os.write(fd, view):]

@@ -1,11 +1,11 @@
-"""What a Dask worker does with a row (the client side is :mod:`rippleb.engine.dask_executor`).
+"""What a Dask worker does with a row (the client side is :mod:`rippleb.engine.dask.executor`).
 
 The worker recomputes the row's simulations from the seed (the simulator is deterministic,
 so the accuracy columns are bit for bit those of a local run) and runs the row with
 :func:`rippleb.engine.executors.run_task`, i.e. with the local run's own pool: the method's fit and
 steps run in their own isolated process (session, PID namespace, memory limit, timeout),
 never see the truth, and a crash is the row's status. As locally, those processes are
-forked by a fork server (:mod:`rippleb.engine.forkserver`), one per worker process, started
+forked by a fork server (:mod:`rippleb.engine.process.forkserver`), one per worker process, started
 before the worker's first row, so no row's memory holds a truth the worker keeps. Scoring
 happens in the task's process (rippleb's code). Simulations and fits are kept per worker
 process in a private temporary directory (:data:`MEMO_CASES` cases at most), so the rows of
@@ -38,7 +38,7 @@ _running = [0]                  # rows running in this process
 
 def warm(blas_threads: int | None = None) -> None:
     """Load what rows need and start this worker's fork server (run on each worker by
-    :func:`rippleb.engine.dask_executor.warm_workers`)."""
+    :func:`rippleb.engine.dask.executor.warm_workers`)."""
     _load_modules()
     _enter_row(blas_threads)  # start this worker's fork server now, from its main thread
     _leave_row()
@@ -75,7 +75,7 @@ def _default_malloc() -> None:
 
 def _load_modules() -> None:
     """The modules every row needs, loaded in the worker and its fork server."""
-    import rippleb.metrics  # noqa: F401 - loaded for the forks to inherit
+    import rippleb.scoring.metrics  # noqa: F401 - loaded for the forks to inherit
     import rippleb.simulator.simulation  # noqa: F401 - with the joint's compiled kernels
 
     _registry().load_builtins()
@@ -90,7 +90,7 @@ def remote_row(task, blas_threads: int | None = None) -> dict:
     BLAS would differ from a local run in its last bits. The worker's fork server is started
     with the client's count, and the row's processes inherit it.
 
-    :class:`rippleb.engine.pool.Pool` starts each job with ``os.fork``, not ``multiprocessing``:
+    :class:`rippleb.engine.process.pool.Pool` starts each job with ``os.fork``, not ``multiprocessing``:
     a dask worker process is *daemonic* (its nanny starts it with ``daemon=True``) and
     ``multiprocessing.Process.start`` refuses children of a daemonic process ("daemonic
     processes are not allowed to have children"), but that check is multiprocessing's
@@ -121,7 +121,7 @@ def _enter_row(blas_threads: int | None = None):
     BLAS thread count, started again) only while no row runs in this process, after the
     memo's simulations are dropped. Its jobs inherit its BLAS thread count, the client's.
     """
-    from rippleb.engine.forkserver import ForkServer
+    from rippleb.engine.process.forkserver import ForkServer
 
     with _rows:
         while not (_server and _server[0].alive() and _server[1] == blas_threads):

@@ -9,7 +9,7 @@ the rows of one seed go to one worker while it has some left (:class:`_Dispatch`
 
 A task carries everything its row needs (:class:`rippleb.engine.executors.RowTask`: the scenario
 objects, the key, the limits) and nothing from the client's disk; what a worker does with
-it is :mod:`rippleb.engine.dask_worker`.
+it is :mod:`rippleb.engine.dask.worker`.
 
 A worker that dies mid-row loses no row: the scheduler runs its task again elsewhere; a
 task that has killed ``distributed.scheduler.allowed-failures`` workers comes back as an
@@ -26,8 +26,8 @@ import time
 import uuid
 
 from rippleb import interrupts
-from rippleb.engine.dask_connect import CONNECT_TIMEOUT_S, check_scheduler, lost
-from rippleb.engine.dask_worker import remote_row, warm
+from rippleb.engine.dask.connect import CONNECT_TIMEOUT_S, check_scheduler, lost
+from rippleb.engine.dask.worker import remote_row, warm
 from rippleb.errors import EnvironmentLost, InputError
 from rippleb.numerics import openblas_threads
 from rippleb.engine.results import ENVIRONMENT
@@ -44,7 +44,7 @@ POLL_S = 0.05
 #: the event-loop watchdog looks 1 time a second instead of 50 (it still warns after 3 s);
 #: the statistical profiler, which would sample a worker thread that only waits for its
 #: row's process, is off; the system monitor's dashboard metrics and the memory monitor are
-#: read every 5 s and 1 s (a row's memory is bounded by its own limit, ``rippleb.engine.pool``).
+#: read every 5 s and 1 s (a row's memory is bounded by its own limit, ``rippleb.engine.process.pool``).
 QUIET_CONFIG = {
     "distributed.admin.tick.interval": "1s",
     "distributed.worker.profile.enabled": False,

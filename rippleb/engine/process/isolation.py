@@ -1,6 +1,6 @@
 """Process control for code rippleb does not trust: a method's import, fit and steps.
 
-A job runs in two processes (:mod:`rippleb.engine.pool`): a *keeper*, rippleb's own code, and
+A job runs in two processes (:mod:`rippleb.engine.process.pool`): a *keeper*, rippleb's own code, and
 the *worker* it forks, which runs the job. The keeper
 
 * starts a new session (``setsid``), and puts the worker in a process group of its own,
@@ -28,10 +28,12 @@ import select
 import signal
 import time
 from dataclasses import dataclass
+from typing import NamedTuple
 
 CLONE_NEWNS = 0x00020000
 CLONE_NEWUSER = 0x10000000
 CLONE_NEWPID = 0x20000000
+CLONE_NEWNET = 0x40000000
 PR_SET_CHILD_SUBREAPER = 36
 PR_SET_PDEATHSIG = 1
 PR_GET_DUMPABLE, PR_SET_DUMPABLE = 3, 4
@@ -42,6 +44,10 @@ MS_RELATIME = 1 << 21
 #: Where the terminals are: hidden from a method, which could otherwise write to rippleb's
 #: own terminal by opening its pseudo-terminal device (same user, same permissions).
 TERMINALS = "/dev/pts"
+#: Where the system's services keep their sockets (D-Bus, a container engine's): hidden from a
+#: method. A named socket is reached by connect(2), which neither Landlock's read rules nor a
+#: network namespace of its own govern; a mount over the directory does.
+SOCKETS = "/run"
 #: A method's scratch directory: a tmpfs of its own, at most 1 GiB (its pages are memory
 #: that ``--memory-limit``'s address-space cap does not count).
 SCRATCH_OPTIONS = "size=1g,mode=0700"
@@ -72,20 +78,37 @@ def die_with_parent() -> None:
         libc().prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
 
 
-#: What :func:`new_namespaces` asks for, best first: ``(unshare flags, (pid, mount))``.
-NAMESPACE_CHOICES = ((CLONE_NEWUSER | CLONE_NEWPID | CLONE_NEWNS, (True, True)),
-                     (CLONE_NEWUSER | CLONE_NEWPID, (True, False)))
+class Namespaces(NamedTuple):
+    """Which new namespaces a job's processes got: ``pid`` (with a user namespace),
+    ``mount`` and ``net`` (a network namespace with nothing in it but a loopback that is down);
+    ``capped``: whether a control group caps its processes (:mod:`rippleb.engine.process.tasks`)."""
+
+    pid: bool
+    mount: bool
+    net: bool
+    capped: bool = False
 
 
-def new_namespaces() -> tuple[bool, bool]:
+#: What :func:`new_namespaces` asks for, best first: ``(unshare flags, what they grant)``.
+NAMESPACE_CHOICES = ((CLONE_NEWUSER | CLONE_NEWPID | CLONE_NEWNS | CLONE_NEWNET, Namespaces(True, True, True)),
+                     (CLONE_NEWUSER | CLONE_NEWPID | CLONE_NEWNS, Namespaces(True, True, False)),
+                     (CLONE_NEWUSER | CLONE_NEWPID | CLONE_NEWNET, Namespaces(True, False, True)),
+                     (CLONE_NEWUSER | CLONE_NEWPID, Namespaces(True, False, False)))
+NONE = Namespaces(False, False, False)
+
+
+def new_namespaces() -> Namespaces:
     """Put this process's *future* children in a new user and PID namespace, and this
-    process in a new mount namespace (``(pid, mount)``: which of them the kernel granted).
+    process in a new mount and network namespace (which of them the kernel granted).
 
     Must be called in a single-threaded process (a freshly forked keeper). The user
     namespace maps the caller's uid and gid onto themselves, so files keep their owner.
     The mount namespace lets the worker mount a /proc of its own and cover the run
     directory (:func:`confine_files`) without touching anyone else's view of the files.
-    Where the kernel or its policy refuses, less is done, and nothing where it refuses all.
+    The network namespace holds no interface but its own loopback, down: no address of
+    this host or any other, and no abstract Unix socket outside it, can be reached (a
+    Dask scheduler on 127.0.0.1 among them). Where the kernel or its policy refuses, less
+    is done, and nothing where it refuses all.
     """
     ids = os.getuid(), os.getgid()   # read before: inside an unmapped namespace they are 65534
     for flags, granted in NAMESPACE_CHOICES:
@@ -95,7 +118,7 @@ def new_namespaces() -> tuple[bool, bool]:
                 return granted
         except (OSError, AttributeError):
             break
-    return False, False
+    return NONE
 
 
 def map_ids(uid: int, gid: int) -> None:
@@ -168,23 +191,27 @@ class Confinement:
     scratch_in
         The directory that holds the job's scratch directory (None: the system's
         temporary directory).
+    readable
+        What the method may read beyond the libraries (its own package: a directory or
+        a module file; :mod:`rippleb.engine.process.landlock`).
     """
 
     read_only: tuple[str, ...] = ()
     hidden: tuple[str, ...] = ()
     scratch_in: str | None = None
+    readable: tuple[str, ...] = ()
 
     @classmethod
-    def of(cls, read_only, hidden, scratch_in) -> "Confinement":
+    def of(cls, read_only, hidden, scratch_in, readable=()) -> "Confinement":
         """From paths (None where there is none), as strings: it is pickled to the fork server."""
         return cls(tuple(str(p) for p in read_only if p), tuple(str(p) for p in hidden if p),
-                   str(scratch_in) if scratch_in else None)
+                   str(scratch_in) if scratch_in else None, tuple(str(p) for p in readable if p))
 
 
 def confine_files(read_only, hidden_files=(), scratch=None) -> list[str]:
     """In a worker that is PID 1 of its own PID and mount namespaces: a /proc of its own
     namespace (the host's processes, its keeper's and the runner's descriptors out of
-    sight), the terminals hidden (:data:`TERMINALS`), each existing directory of
+    sight), the terminals and the services' sockets hidden (:data:`TERMINALS`, :data:`SOCKETS`), each existing directory of
     ``read_only`` (the run directory, the cache) mounted read-only over itself, each
     existing file of ``hidden_files`` (rippleb's key) covered by ``/dev/null``, and a
     private tmpfs over ``scratch`` (:data:`SCRATCH_OPTIONS`), gone with the worker.
@@ -198,9 +225,11 @@ def confine_files(read_only, hidden_files=(), scratch=None) -> list[str]:
         return ["a private mount namespace"]
     if _mount("proc", "/proc", "proc", MS_NOSUID | MS_NODEV | MS_NOEXEC) != 0:
         missing.append("a /proc of its own")
-    if os.path.isdir(TERMINALS) and _mount("tmpfs", TERMINALS, "tmpfs", MS_NOSUID | MS_NODEV | MS_NOEXEC,
-                                           "size=4k,mode=0555") != 0:
-        missing.append(f"{TERMINALS} hidden")
+    inside = scratch is not None and os.path.realpath(scratch).startswith(SOCKETS + "/")
+    for covered in (TERMINALS,) + (() if inside else (SOCKETS,)):   # a scratch directory under /run stays reachable
+        if os.path.isdir(covered) and _mount("tmpfs", covered, "tmpfs", MS_NOSUID | MS_NODEV | MS_NOEXEC,
+                                             "size=4k,mode=0555") != 0:
+            missing.append(f"{covered} hidden")
     for path in dict.fromkeys(str(p) for p in read_only):
         if os.path.isdir(path) and not _read_only(path):
             missing.append(f"{path} read-only")

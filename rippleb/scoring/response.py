@@ -1,9 +1,9 @@
 """The dynamic-response columns: how fast the estimate follows a torque step
 (``step_latency_ms``) and up to which frequency it follows a chirp (``bandwidth_hz``).
 
-Both are measured on the scenario's known loads, which :class:`rippleb.metrics.Truth`
+Both are measured on the scenario's known loads, which :class:`rippleb.scoring.metrics.Truth`
 (``truth_info`` below) carries: its ``steps``, ``chirps``, ``fs``, ``eval_mask`` and
-``torque_true``. :func:`rippleb.metrics.score` puts them in each row;
+``torque_true``. :func:`rippleb.scoring.metrics.score` puts them in each row;
 ``docs/metrics.md`` repeats the formulas.
 """
 

@@ -2,7 +2,7 @@
 
 Why not joblib or multiprocessing: a method that sleeps forever, allocates without bound,
 forks, or signals its process group must cost exactly its own row. Every job therefore
-runs in its own pair of forked processes (:mod:`rippleb.engine.keeper`, :mod:`rippleb.engine.isolation`):
+runs in its own pair of forked processes (:mod:`rippleb.engine.process.keeper`, :mod:`rippleb.engine.process.isolation`):
 a *keeper* (rippleb's code: new session, new PID namespace where permitted, child
 subreaper) and the *worker* it forks, which runs the job with a memory limit
 (``RLIMIT_AS``, soft and hard, so the job cannot lift it), with every inherited file
@@ -15,7 +15,7 @@ No wait here is unbounded, and none ignores Ctrl-C or SIGTERM (:mod:`rippleb.int
 is ever half started or half ended, and :meth:`Pool.kill_all` ends every job within a
 few seconds, even one whose keeper is stuck.
 
-In a local run the keepers are forked by a fork server (:mod:`rippleb.engine.forkserver`) that
+In a local run the keepers are forked by a fork server (:mod:`rippleb.engine.process.forkserver`) that
 was forked before the first simulation, so no job's memory holds a truth; without a server
 (a Dask worker's row, ``rippleb list``'s import probes) the keeper is forked from here.
 
@@ -27,9 +27,7 @@ writes more than ``max_bytes`` is killed.
 
 from __future__ import annotations
 
-import atexit
 import contextlib
-import functools
 import os
 import re
 import select
@@ -39,10 +37,11 @@ import time
 from dataclasses import dataclass, field
 
 from rippleb import interrupts
-from rippleb.engine.keeper import keeper
+from rippleb.engine.process.joblog import write_all
+from rippleb.engine.process.keeper import Bound, keeper
+from rippleb.engine.process.reaping import EXITING, KEEPER_GRACE_S, kill_keeper, reap_exiting, wait_keeper
 
 POLL_S = 0.2
-KEEPER_GRACE_S = 5.0
 DEFAULT_MAX_BYTES = 2**30
 
 
@@ -51,12 +50,15 @@ class Finished:
     """How a job ended: ``kind`` is ``done`` (``value`` holds its bytes), ``raised``
     (``value`` is the one-line error), ``timeout``, ``oversized``, ``garbled`` (its control
     pipe held bytes no keeper writes; ``value``: the first of them) or ``died`` (``value``
-    the worker's exit code, negative for a signal)."""
+    the worker's exit code, negative for a signal). ``method_s``: the seconds the method's
+    part of the job took, measured by its keeper outside the method's process
+    (:mod:`rippleb.engine.process.keeper`), None where it never started or was cut off."""
 
     key: object
     kind: str
     value: object
     wall_s: float
+    method_s: float | None = None
 
 
 @dataclass
@@ -74,6 +76,13 @@ class _Running:
     ctrl: bytearray = field(default_factory=bytearray)
     result_eof: bool = False
     ctrl_eof: bool = False
+    sink: str | None = None        # the file the result goes to, past its tag (else: memory)
+    sink_fd: int | None = None
+    sunk: int = 0
+
+    def size(self, name: str) -> int:
+        """Bytes received on the ``result`` or ``ctrl`` pipe so far."""
+        return len(self.result) + self.sunk if name == "result" else len(self.ctrl)
 
     @property
     def garbled(self) -> bool:
@@ -100,21 +109,28 @@ class _Running:
         parsed = control(bytes(self.ctrl))
         return None if parsed is None else parsed[1]
 
+    @property
+    def method_s(self) -> float | None:
+        parsed = control(bytes(self.ctrl))
+        return None if parsed is None or parsed[2] is None or parsed[2] < 0 else parsed[2] / 1e9
 
-#: The keeper's two lines, ``"<worker PID> <0|1>\n"`` and ``"<exit code>\n"``, complete or
-#: cut short by a read (a prefix of them); nothing else.
-_CONTROL = re.compile(rb"(?:(\d{1,10}) [01]\n(?:(-?\d{1,4})\n|-?\d{0,4})|\d{0,10}(?: [01]?)?)")
+
+#: The keeper's two lines, ``"<worker PID> <0|1>\n"`` and ``"<exit code> <method ns>\n"``,
+#: complete or cut short by a read (a prefix of them); nothing else.
+_CONTROL = re.compile(rb"(?:(\d{1,10}) [01]\n(?:(-?\d{1,4}) (-1|\d{1,19})\n|-?\d{0,4}(?: -?\d{0,19})?)"
+                      rb"|\d{0,10}(?: [01]?)?)")
 
 
-def control(data: bytes) -> tuple[int | None, int | None] | None:
-    """``(worker PID, exit code)`` from the bytes of a control pipe (None where not yet
-    sent), or None when they are not what a keeper writes: a process of the job wrote
-    into the pipe (docs/robustness.md). Parsed strictly, so no byte there can raise."""
+def control(data: bytes) -> tuple[int | None, int | None, int | None] | None:
+    """``(worker PID, exit code, method ns)`` from the bytes of a control pipe (None where
+    not yet sent; method ns -1 where the method never started), or None when they are not
+    what a keeper writes: a process of the job wrote into the pipe (docs/robustness.md).
+    Parsed strictly, so no byte there can raise."""
     match = _CONTROL.fullmatch(data)
     if match is None:
         return None
-    worker, code = match.groups()
-    return (int(worker) if worker else None), (int(code) if code else None)
+    worker, code, span = match.groups()
+    return (int(worker) if worker else None), (int(code) if code else None), (int(span) if span else None)
 
 
 class Pool:
@@ -129,7 +145,7 @@ class Pool:
     context
         Passed to every job: a job runs as ``job(context)``, or ``job()`` when None.
     server
-        A :class:`rippleb.engine.forkserver.ForkServer` to fork the keepers (it passes its own
+        A :class:`rippleb.engine.process.forkserver.ForkServer` to fork the keepers (it passes its own
         context); jobs must then be picklable. None forks them from this process.
     """
 
@@ -151,12 +167,14 @@ class Pool:
         return bool(self._running)
 
     def submit(self, key, fn, timeout: float | None = None, output: str | None = None,
-               max_bytes: int | None = None, confine=None) -> None:
+               max_bytes: int | None = None, confine=None, sink: str | None = None) -> None:
         """Start ``fn`` (see ``context``) in an isolated worker; its stdout and stderr go to
         the file ``output`` (or /dev/null), so a chatty plugin cannot garble the CLI's output.
 
-        ``confine``: None for rippleb's own jobs; for a method's, an :class:`~rippleb.engine.isolation.Confinement`
-        (the directories its worker sees read-only, the files hidden from it)."""
+        ``confine``: None for rippleb's own jobs; for a method's, an :class:`~rippleb.engine.process.isolation.Confinement`
+        (the directories its worker sees read-only, the files hidden from it). ``sink``: a new
+        file that receives the result as it arrives, so a large one (a fitted method's state)
+        never sits in this process's memory; a ``done`` job's value is then that path."""
         # Held: a keeper started but not yet tracked would be orphaned with its pipes open.
         with interrupts.held():
             reap_exiting()
@@ -174,14 +192,16 @@ class Pool:
             for fd in (result_r, ctrl_r):
                 os.set_blocking(fd, False)
             now = time.monotonic()
+            sink_fd = None if sink is None else os.open(sink, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW
+                                                        | os.O_CLOEXEC, 0o600)
             self._running.append(_Running(key, pid, result_r, ctrl_r, now, now + timeout if timeout else None,
                                           max_bytes or DEFAULT_MAX_BYTES, direct=self.server is None,
-                                          keeper_session=pid))
+                                          keeper_session=pid, sink=sink, sink_fd=sink_fd))
 
     def _start_keeper(self, fn, result_w: int, ctrl_w: int, output, confine) -> int:
         if self.server is not None:
             return self.server.spawn(fn, result_w, ctrl_w, self.memory_mb, output, confine)
-        bound = fn if self.context is None else functools.partial(fn, self.context)
+        bound = Bound(fn, self.context)
         sys.stdout.flush()
         sys.stderr.flush()
         pid = os.fork()
@@ -224,17 +244,20 @@ class Pool:
         for run in list(self._running):
             _read(run)
             result = None
-            if len(run.result) > run.max_bytes:
-                result = Finished(run.key, "oversized", len(run.result), now - run.started)
+            if run.size("result") > run.max_bytes:
+                result = Finished(run.key, "oversized", run.size("result"), now - run.started)
             elif run.garbled:
                 result = Finished(run.key, "garbled", bytes(run.ctrl[:40]), now - run.started)
             elif run.exit_code is not None or run.ctrl_eof:
-                _end(run, _EXITING)  # the worker is gone: drain its pipe to the end
+                _end(run, EXITING)  # the worker is gone: drain its pipe to the end
                 result = _outcome(run, now)
             elif run.deadline is not None and now >= run.deadline:
                 result = Finished(run.key, "timeout", None, now - run.started)
             if result is not None:
                 _end(run)
+                if run.sink is not None and result.kind != "done":
+                    with contextlib.suppress(OSError):
+                        os.unlink(run.sink)
                 self._running.remove(run)
                 done.append(result)
         return done
@@ -244,9 +267,9 @@ def _outcome(run: _Running, now: float) -> Finished:
     wall = now - run.started
     tag, payload = bytes(run.result[:1]), bytes(run.result[1:])
     if tag == b"D":
-        return Finished(run.key, "done", payload, wall)
+        return Finished(run.key, "done", payload if run.sink is None else run.sink, wall, run.method_s)
     if tag == b"R":
-        return Finished(run.key, "raised", payload.decode(errors="replace"), wall)
+        return Finished(run.key, "raised", payload.decode(errors="replace"), wall, run.method_s)
     code = run.exit_code
     return Finished(run.key, "died", code, wall)
 
@@ -256,7 +279,7 @@ def _read(run: _Running) -> None:
         fd, buf = getattr(run, f"{name}_fd"), getattr(run, name)
         if getattr(run, f"{name}_eof"):
             continue
-        while len(buf) <= run.max_bytes:
+        while run.size(name) <= run.max_bytes:
             try:
                 chunk = os.read(fd, 1 << 20)
             except BlockingIOError:
@@ -266,7 +289,14 @@ def _read(run: _Running) -> None:
             if not chunk:
                 setattr(run, f"{name}_eof", True)
                 break
-            buf += chunk
+            if not buf:   # the tag stays here
+                buf += chunk[:1]
+                chunk = chunk[1:]
+            if name == "result" and run.sink_fd is not None and buf[:1] == b"D":   # a result: to its file
+                write_all(run.sink_fd, chunk)
+                run.sunk += len(chunk)
+            else:                                                                 # a one-line error
+                buf += chunk
 
 
 def _kill_workers(runs: list[_Running], wait_s: float = 1.0) -> None:
@@ -301,21 +331,21 @@ def _end(run: _Running, exiting: list | None = None) -> None:
         with contextlib.suppress(ProcessLookupError, PermissionError):
             os.kill(run.worker, signal.SIGKILL)
     elif run.exit_code is None and not run.ctrl_eof:
-        _kill_keeper(run.keeper)  # it never named its worker: the worker dies with it (PDEATHSIG)
+        kill_keeper(run.keeper)  # it never named its worker: the worker dies with it (PDEATHSIG)
     if not run.direct:  # the fork server reaps it: only make sure it is gone
         if run.exit_code is None:
             _await_keeper_exit(run)
     elif cleaned:
         exiting.append((run.keeper, time.monotonic() + KEEPER_GRACE_S))
     else:
-        _wait_keeper(run.keeper)
+        wait_keeper(run.keeper)
     # Every writer should be gone now (the keeper ended the worker's processes before it
     # reported): take what is left in the pipes (bounded in time, in case an escaped
     # process still holds one), then close them.
     give_up = time.monotonic() + 1.0
     while not (run.result_eof and (run.ctrl_eof or cleaned)) and time.monotonic() < give_up:
         _read(run)
-        if len(run.result) > run.max_bytes:
+        if run.size("result") > run.max_bytes:
             break
         open_fds = [fd for fd, eof in ((run.result_fd, run.result_eof), (run.ctrl_fd, run.ctrl_eof or cleaned))
                     if not eof]
@@ -324,34 +354,10 @@ def _end(run: _Running, exiting: list | None = None) -> None:
                 select.select(open_fds, [], [], 0.05)
     os.close(run.result_fd)
     os.close(run.ctrl_fd)
+    if run.sink_fd is not None:
+        os.close(run.sink_fd)
+        run.sink_fd = None
     run.keeper = None
-
-
-#: Keepers whose job has ended and that have only to exit: ``(pid, when to stop waiting)``.
-#: Shared by every pool of the process (a Dask worker runs one pool per row), reaped by
-#: the next pool call and at exit.
-_EXITING: list[tuple[int, float]] = []
-
-
-def reap_exiting(block: bool = False) -> None:
-    """Reap the keepers of :data:`_EXITING` that have exited (all of them if ``block``);
-    end any that overstays its grace."""
-    now = time.monotonic()
-    still = []
-    for pid, deadline in _EXITING:
-        try:
-            if os.waitpid(pid, os.WNOHANG)[0]:
-                continue
-        except ChildProcessError:  # reaped already
-            continue
-        if block or now > deadline:
-            _wait_keeper(pid, max(0.0, deadline - now))
-        else:
-            still.append((pid, deadline))
-    _EXITING[:] = still
-
-
-atexit.register(reap_exiting, True)
 
 
 def _await_keeper_exit(run: _Running, grace_s: float = KEEPER_GRACE_S) -> None:
@@ -363,24 +369,4 @@ def _await_keeper_exit(run: _Running, grace_s: float = KEEPER_GRACE_S) -> None:
             select.select([run.ctrl_fd], [], [], 0.05)
         _read(run)
     if not run.ctrl_eof:
-        _kill_keeper(run.keeper)
-
-
-def _wait_keeper(keeper: int, grace_s: float = KEEPER_GRACE_S) -> None:
-    """Reap ``keeper``; if it has not exited within ``grace_s``, end its whole session."""
-    deadline = time.monotonic() + grace_s
-    while True:
-        pid, _ = os.waitpid(keeper, os.WNOHANG)
-        if pid or time.monotonic() > deadline:
-            break
-        time.sleep(0.005)
-    if not pid:  # the keeper did not finish its cleanup in time: end its whole session
-        _kill_keeper(keeper)
-        os.waitpid(keeper, 0)  # SIGKILL cannot be caught: this returns at once
-
-
-def _kill_keeper(keeper: int) -> None:
-    """SIGKILL a keeper and its session (one not yet in a session of its own, too)."""
-    for kill in (os.killpg, os.kill):
-        with contextlib.suppress(ProcessLookupError, PermissionError):
-            kill(keeper, signal.SIGKILL)
+        kill_keeper(run.keeper)

@@ -1,7 +1,7 @@
 """The walls a method's worker cannot take down (issue 34): applied in the forked worker,
-after :func:`rippleb.engine.isolation.confine_files` and before any plugin code runs.
+after :func:`rippleb.engine.process.isolation.confine_files` and before any plugin code runs.
 
-The mounts of :mod:`rippleb.engine.isolation` alone did not hold: the worker owned the user
+The mounts of :mod:`rippleb.engine.process.isolation` alone did not hold: the worker owned the user
 namespace they were made in, so it held every capability over them and unmounted the
 key's cover, the read-only run directory and its ``/proc``. Each step below is the
 kernel's own mechanism, and none can be undone by the process it is applied to:
@@ -14,16 +14,19 @@ kernel's own mechanism, and none can be undone by the process it is applied to:
    and tear down per job, about 2 ms on a loaded machine, for nothing more.
 2. **No new privileges** (``PR_SET_NO_NEW_PRIVS``): no set-uid program gives any back;
    required for the two steps after it.
-3. **Landlock** (landlock(7)): writing, creating, removing and renaming files is denied
-   everywhere but beneath the job's scratch directory (a tmpfs of its own,
-   :data:`rippleb.engine.isolation.SCRATCH_OPTIONS`) and ``/dev/null``: the rippleb
-   package, site-packages, ``$HOME``, the run directory and the cache are read-only.
+3. **Landlock** (landlock(7), :mod:`rippleb.engine.process.landlock`): reading only the
+   libraries and the method's own package, writing only beneath the job's scratch directory
+   (a tmpfs of its own, :data:`rippleb.engine.process.isolation.SCRATCH_OPTIONS`); no TCP
+   connection, no abstract Unix socket or signal outside its own processes.
 4. **seccomp** through libseccomp (the library behind Docker's, systemd's and Flatpak's
    filters): :data:`DENIED_CALLS` fail with ``EPERM``, a ``clone`` that asks for a new
    namespace too, and ``clone3`` (whose flags a filter cannot read) with ``ENOSYS``, which
    makes the C library fall back to ``clone``.
 5. **No capabilities**: the bounding and ambient sets are emptied, then the effective,
    permitted and inheritable sets.
+6. **A process cap** (``RLIMIT_NPROC`` at :data:`MAX_TASKS`, soft and hard): counted per
+   user namespace, so in the worker's own one it counts the job's processes and threads
+   alone, and without ``CAP_SYS_RESOURCE`` in the host's namespace it cannot be raised.
 
 Nothing here execs: the fork server's preloaded worker keeps its imports. Where the kernel
 grants less (no user namespaces, no Landlock, no libseccomp), the steps it grants are
@@ -39,9 +42,10 @@ import ctypes.util
 import errno
 import functools
 import os
+import resource
 import warnings
 
-from rippleb.engine import isolation
+from rippleb.engine.process import isolation, landlock, tasks
 from rippleb.errors import InputError, RunWarning
 
 #: Calls no method needs that would let it reach past its walls: mounts (old and new API),
@@ -50,17 +54,17 @@ from rippleb.errors import InputError, RunWarning
 DENIED_CALLS = ("mount", "umount2", "pivot_root", "move_mount", "open_tree", "fsopen", "fsmount", "fsconfig",
                 "fspick", "mount_setattr", "ptrace", "process_vm_readv", "process_vm_writev", "unshare",
                 "setns", "bpf", "keyctl", "add_key", "request_key", "perf_event_open")
+#: Processes and threads one job may hold at once (its worker included): a fork bomb stops
+#: there (issue 41: 300 children in one row), each of them bounded by the memory limit.
+#: A built-in method's job runs one; OpenBLAS is held at one thread (rippleb.numerics), and
+#: a method's own pool of threads or processes has room up to this.
+MAX_TASKS = 64
 #: ``clone`` flags that ask for a new namespace (sched.h).
 NAMESPACE_FLAGS = (0x00020000, 0x02000000, 0x04000000, 0x08000000, 0x10000000, 0x20000000, 0x40000000)
 
 PR_SET_NO_NEW_PRIVS, PR_CAPBSET_DROP, PR_CAP_AMBIENT, PR_CAP_AMBIENT_CLEAR_ALL = 38, 24, 47, 4
 PR_SET_SECCOMP, SECCOMP_MODE_FILTER = 22, 2
 SYS_CAPSET = 126   # x86-64
-SYS_LANDLOCK_CREATE_RULESET, SYS_LANDLOCK_ADD_RULE, SYS_LANDLOCK_RESTRICT_SELF = 444, 445, 446
-LANDLOCK_CREATE_RULESET_VERSION, LANDLOCK_RULE_PATH_BENEATH = 1, 1
-# landlock(7) file system rights: what changes a file or a directory's entries.
-LL_WRITE_FILE, LL_TRUNCATE, LL_REFER = 1 << 1, 1 << 14, 1 << 13
-LL_CHANGES_ENTRIES = sum(1 << bit for bit in (4, 5, 6, 7, 8, 9, 10, 11, 12))   # remove_*, make_*
 SCMP_ACT_ALLOW = 0x7FFF0000
 SCMP_CMP_MASKED_EQ = 7
 
@@ -72,11 +76,6 @@ def SCMP_ACT_ERRNO(code: int) -> int:   # noqa: N802 - libseccomp's name
 class _ArgCmp(ctypes.Structure):
     _fields_ = [("arg", ctypes.c_uint), ("op", ctypes.c_int), ("datum_a", ctypes.c_uint64),
                 ("datum_b", ctypes.c_uint64)]
-
-
-class _PathBeneath(ctypes.Structure):
-    _pack_ = 1
-    _fields_ = [("allowed_access", ctypes.c_uint64), ("parent_fd", ctypes.c_int32)]
 
 
 @functools.cache
@@ -103,23 +102,37 @@ def _syscall(*args) -> int:
     return libc.syscall(*args)
 
 
-def lock_down(scratch: str | None, nested_namespace: bool) -> list[str]:
+def lock_down(scratch: str | None, nested_namespace: bool, readable=(), own_proc: bool = True,
+              own_users: bool = True, capped: bool = False) -> list[str]:
     """Apply every step this kernel grants (module docstring) to this process; return what
     it could not, one phrase each (empty when all held). ``scratch``: the one directory
     this process may write; ``nested_namespace``: keep its mounts out of its reach (only
-    where it runs in a user namespace of rippleb's, with mounts to keep)."""
-    missing = []
+    where it runs in a user namespace of rippleb's, with mounts to keep); ``readable``
+    and ``own_proc``: what it may read beyond the libraries (:func:`rippleb.engine.process.landlock.restrict`);
+    ``own_users``: it runs in a user namespace of its own, where the process cap counts
+    its own processes only (elsewhere it would count every process of the user);
+    ``capped``: a control group caps them already (:mod:`rippleb.engine.process.tasks`)."""
+    capped = (own_users and _limit_tasks()) or capped
+    missing = [] if capped else ["a cap on its processes"]
     if nested_namespace and not _second_user_namespace():
         missing.append("a second user namespace (mounts it cannot undo)")
     if _prctl(PR_SET_NO_NEW_PRIVS, 1) != 0:
         missing.append("no-new-privileges")
-    if not _landlock(scratch):
-        missing.append("Landlock (a read-only file system but its scratch directory)")
+    missing += landlock.restrict(scratch, readable, own_proc)
     if not _seccomp_filter():
         missing.append("a seccomp filter (libseccomp)")
     if not _drop_capabilities():
         missing.append("an empty capability set")
     return missing
+
+
+def _limit_tasks() -> bool:
+    """``RLIMIT_NPROC`` at :data:`MAX_TASKS`; False where the kernel does not apply it (root)."""
+    try:
+        resource.setrlimit(resource.RLIMIT_NPROC, (MAX_TASKS, MAX_TASKS))
+    except (OSError, ValueError):
+        return False
+    return os.getuid() != 0
 
 
 @functools.cache
@@ -145,40 +158,6 @@ def _second_user_namespace() -> bool:
         return False
     isolation.map_ids(uid, gid)
     return True
-
-
-def _landlock(scratch: str | None) -> bool:
-    abi = _syscall(SYS_LANDLOCK_CREATE_RULESET, None, ctypes.c_size_t(0),
-                   ctypes.c_uint32(LANDLOCK_CREATE_RULESET_VERSION))
-    if abi < 1:
-        return False
-    file_rights = LL_WRITE_FILE | (LL_TRUNCATE if abi >= 3 else 0)
-    handled = ctypes.c_uint64(file_rights | LL_CHANGES_ENTRIES | (LL_REFER if abi >= 2 else 0))
-    ruleset = _syscall(SYS_LANDLOCK_CREATE_RULESET, ctypes.byref(handled), ctypes.c_size_t(8), ctypes.c_uint32(0))
-    if ruleset < 0:
-        return False
-    try:
-        allowed = [(scratch, handled.value)] if scratch else []
-        allowed.append((os.devnull, file_rights))
-        for path, rights in allowed:
-            if not _allow_beneath(ruleset, path, rights):
-                return False
-        return _syscall(SYS_LANDLOCK_RESTRICT_SELF, ctypes.c_int(ruleset), ctypes.c_uint32(0)) == 0
-    finally:
-        os.close(ruleset)
-
-
-def _allow_beneath(ruleset: int, path: str, rights: int) -> bool:
-    try:
-        fd = os.open(path, os.O_PATH | os.O_CLOEXEC)
-    except OSError:
-        return False
-    try:
-        rule = _PathBeneath(rights, fd)
-        return _syscall(SYS_LANDLOCK_ADD_RULE, ctypes.c_int(ruleset), ctypes.c_int(LANDLOCK_RULE_PATH_BENEATH),
-                        ctypes.byref(rule), ctypes.c_uint32(0)) == 0
-    finally:
-        os.close(fd)
 
 
 class _Program(ctypes.Structure):   # struct sock_fprog
@@ -242,20 +221,6 @@ def _last_capability() -> int:
         return 63
 
 
-def wipe_command_line() -> None:
-    """Zero this process's command line (``/proc/self/cmdline``): a forked worker inherits
-    the runner's, which names ``--salt-file FILE`` in a resumed sealed run. The runner's
-    own copy is untouched: the worker's pages are its own once written."""
-    try:
-        with open("/proc/self/stat", "rb") as fh:
-            fields = fh.read().rsplit(b")", 1)[1].split()
-        start, end = int(fields[45]), int(fields[46])   # arg_start, arg_end: fields 48, 49 of proc(5)
-    except (OSError, ValueError, IndexError):
-        return
-    if 0 < start < end:
-        ctypes.memset(start, 0, end - start)
-
-
 def say_missing(sealed: bool) -> None:
     """Once per run of the local pool: one warning naming the protections this kernel does
     not grant a method's process; for a sealed run (new or resumed), refusal instead."""
@@ -266,9 +231,9 @@ def say_missing(sealed: bool) -> None:
     if sealed:
         raise InputError(f"--sealed needs every wall around a method's process, and this kernel does not grant "
                          f"{lacking}; a method could reach the salt: run sealed comparisons where it does "
-                         f"(docs/robustness.md, section 10)")
+                         f"(docs/robustness.md, sections 10 and 11)")
     warnings.warn(f"this kernel does not grant a method's process {lacking}: it can reach more than "
-                  f"docs/robustness.md says (section 10)", RunWarning, stacklevel=3)
+                  f"docs/robustness.md says (sections 10 and 11)", RunWarning, stacklevel=3)
 
 
 def missing_protections() -> tuple[str, ...]:
@@ -287,26 +252,34 @@ def missing_protections() -> tuple[str, ...]:
     with os.fdopen(read_fd, "rb") as fh:
         found = fh.read().decode()
     os.waitpid(pid, 0)
+    tasks.remove(pid)
     return tuple(line for line in found.splitlines() if line)
 
 
 def _probe(write_fd: int) -> None:
-    isolated, own_mounts = isolation.new_namespaces()
-    missing = [] if isolated else ["a user and PID namespace"]
-    if isolated and not own_mounts:
+    capped = tasks.enter(MAX_TASKS + 1) is not None
+    granted = isolation.new_namespaces()
+    missing = [] if granted.pid else ["a user and PID namespace"]
+    if granted.pid and not granted.mount:
         missing.append("a mount namespace")
+    if not granted.net:
+        missing.append("a network namespace (the network closed)")
     worker = os.fork()   # a new PID namespace holds this process's children, not itself
     if worker == 0:
-        if isolated and own_mounts:
+        if granted.mount:
             missing += isolation.confine_files(())
-        missing += lock_down(None, nested_namespace=isolated and own_mounts)
+        missing += lock_down(None, nested_namespace=granted.mount, own_proc=granted.mount, own_users=granted.pid,
+                             capped=capped)
         os.write(write_fd, "\n".join(missing).encode())
         os._exit(0)
     os.close(write_fd)
     os.waitpid(worker, 0)
 
 
-with contextlib.suppress(OSError, AttributeError):   # made in the runner, inherited by every worker
+with contextlib.suppress(OSError, AttributeError, ImportError):   # made in the runner, inherited by every worker
     _filter_program()
+    tasks.pids_root()
+    landlock.library_paths()
+    landlock.abi()
     _prctl_call()
     _last_capability()

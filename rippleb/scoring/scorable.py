@@ -1,6 +1,6 @@
 """Whether a row of a recorded log can be scored right; rows that cannot are never ``ok``.
 
-Two rules, applied to every row of a recorded log (:func:`rippleb.engine.jobs.score_or_invalid`):
+Two rules, applied to every row of a recorded log (:func:`rippleb.scoring.row.score_or_invalid`):
 
 * **Scale.** An estimate whose peak exceeds :data:`~rippleb.data.MAX_TORQUE_FACTOR` times the
   joint's rated torque is ``invalid``, with a message, not a number. No harmonic drive carries

@@ -323,3 +323,17 @@ def test_a_single_turn_encoder_that_wraps_is_named(tmp_path):
         read_log(tmp_path / "rec.csv")
     with pytest.raises(InputError, match=r"column encoder wraps at 4096 counts .*numpy.unwrap"):
         read_log(tmp_path / "rec.csv", joint=_joint(tmp_path, "[joint]\ncounts_per_rev = 4096\n"))
+
+
+def test_the_gear_ratio_note_names_every_reader_of_the_gear_ratio():
+    """joint_checks.GEAR_RATIO_NOTE says which built-in reads ``gear_ratio`` and that no score
+    does: read from the source, so a method or a score that starts to read it fails here."""
+    from pathlib import Path
+
+    from rippleb.joint_checks import GEAR_RATIO_NOTE
+
+    root = Path(__file__).resolve().parents[1]
+    readers = sorted(p.stem for p in (root / "methods").glob("*.py") if "gear_ratio" in p.read_text())
+    assert readers == ["current_based"] and "only current-based reads it" in GEAR_RATIO_NOTE
+    scores = [p.name for p in (root / "rippleb" / "scoring").glob("*.py") if "gear_ratio" in p.read_text()]
+    assert scores == [] and "no score uses it" in GEAR_RATIO_NOTE

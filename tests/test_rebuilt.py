@@ -1,4 +1,4 @@
-"""The torque rebuilt from the strain (rippleb/rebuilt.py), on a joint whose every part is known.
+"""The torque rebuilt from the strain (rippleb/scoring/rebuilt.py), on a joint whose every part is known.
 
 A synthetic joint: the motor turns through a rest-to-rest move; the true torque is a slow load
 plus the gear's inertial torque, locked to the wave-generator angle and growing with the speed

@@ -59,6 +59,11 @@ READING_RECORDED = """## Reading these tables
 - Every number comes from the recorded log named in the scenario column (`log:NAME`),
   scored against its `torque_ref` column where it has one (and `torque_true` where the log
   has one); one log is one device, so there are no intervals over devices.
+- What `torque_ref` is decides the ranking (`[joint.reference] kind` in the joint file): a
+  transducer in series reads the real torque, and the error against it ranks; a model
+  (eq. (7)) lacks the gear's own torque, which a method that erases it would be rewarded for,
+  so the rows are ranked by `rms_error_rebuilt_nm`, the error against the torque rebuilt from
+  the strain (`docs/metrics.md`, "Scores against a reference").
 - Every row also has the truth-free scores (`ripple_wg_nm`, `rest_std_nm`,
   `strain_delay_ms`), computed from the estimate, the strain and the encoder alone; a log
   without any reference is ranked by them. Each measures one symptom, not the error

@@ -1,15 +1,31 @@
-"""Where the time of a finished run went: simulation, fit, stream, row process, scoring.
+"""Where the CPU time of a finished run went: simulations, fits, streaming, scoring, and
+the rest, which is what running each row in its own isolated processes costs.
 
-    python benchmarks/run_time_breakdown.py runs/published
+    python benchmarks/run_time_breakdown.py DIR [--cpu-s SECONDS]
 
-Reads the run's ``results.csv`` and ``provenance.json`` (wall time, jobs) and times, in
-this process, what the rows do not record: one simulation of every scenario of the run
-(seed 0, each condition once) and the runner's scoring of one row per scenario. Prints a
-Markdown table of CPU seconds per part; docs/report.md quotes it.
+The run's own CPU time (its runner and every process it started, user and system) is
+``cpu_s`` in ``DIR/provenance.json``; ``--cpu-s`` gives it for a run recorded before
+rippleb kept it (e.g. from ``/usr/bin/time``). This script times again, in its own
+process and in CPU seconds (``time.process_time``: a loaded machine inflates them as it
+inflated the run, and no process waiting for a core is counted), each thing the run did
+once per seed, at the run's first seed, and multiplies it by the number of seeds:
+
+* one simulation per scenario and condition, and the calibration per calibration condition;
+* one fit per method and calibration condition;
+* per method, scenario and condition: the log streamed through ``step`` (the harness's
+  timed loop, :func:`rippleb.harness.stream`), and the runner's scoring of that estimate
+  (:func:`rippleb.scoring.row.score_row`), once per row.
+
+The rest of the run's CPU time is the rows' processes: starting and ending them (the
+forks, the namespaces, the walls), handing them their inputs, unpickling the fitted
+method, ``reset``, cutting the log into blocks, sending the estimate back, and the
+runner's bookkeeping (scheduling, writing rows). Prints a Markdown table; docs/report.md
+("Where the time of the run goes") quotes it.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 import time
@@ -21,56 +37,86 @@ import numpy as np
 import pandas as pd
 
 
-def _timed(fn) -> float:
-    t0 = time.perf_counter()
-    fn()
-    return time.perf_counter() - t0
+def _cpu(fn):
+    """``(result, CPU seconds)`` of ``fn()`` in this process."""
+    t0 = time.process_time()
+    result = fn()
+    return result, time.process_time() - t0
 
 
-def breakdown(run_dir: Path) -> pd.DataFrame:
-    from rippleb.scoring.metrics import Truth, score
+def breakdown(run_dir: Path, cpu_s: float) -> tuple[pd.DataFrame, dict]:
+    """The table of parts (CPU seconds and share of ``cpu_s``) and facts of the run."""
+    from rippleb import harness
     from rippleb.engine.results import read_rows
+    from rippleb.registry import Registry
+    from rippleb.scoring.metrics import Truth
+    from rippleb.scoring.row import score_row
     from rippleb.simulator import simulate
+    from rippleb.simulator.conditions import calibration_condition
+    from rippleb.variants import split_label
 
     rows = pd.DataFrame(read_rows(run_dir / "results.csv"))
-    for name in ("wall_s", "fit_s", "n_samples", "samples_per_s"):
-        rows[name] = pd.to_numeric(rows[name], errors="coerce")
     ok = rows[rows["status"] == "ok"]
-    stream = (ok["n_samples"] / ok["samples_per_s"]).sum()
-    fits = ok.drop_duplicates(["method", "seed"])["fit_s"].sum()
-    seeds = rows["seed"].nunique()
-    sims, scoring = 0.0, 0.0
-    for (scenario, condition), group in rows.groupby(["scenario", "condition"]):
-        sim_s = _timed(lambda: simulate(scenario, 0, condition))
-        sim = simulate(scenario, 0, condition)
+    seeds = sorted(rows["seed"].astype(int).unique())
+    first, n_seeds = int(seeds[0]), len(seeds)
+    registry = Registry.discover()
+    sims = fits = stream = scoring = 0.0
+    calibrations = {}
+    for condition in sorted({calibration_condition(c) for c in rows["condition"]}):
+        calibrations[condition], spent = _cpu(lambda: simulate("calibration", first, condition))
+        sims += spent * n_seeds
+    fitted = {}
+    for method, condition in sorted({(m, calibration_condition(c)) for m, c in zip(ok["method"], ok["condition"])}):
+        name, params = split_label(method)
+        cls = registry.get(name).load()
+        (fitted[method, condition], _, _), spent = _cpu(
+            lambda: harness.fitted(cls, params, calibrations[condition].log))
+        fits += spent * n_seeds
+    for (scenario, condition), group in ok.groupby(["scenario", "condition"]):
+        sim, spent = _cpu(lambda: simulate(scenario, first, condition))
+        sims += spent * n_seeds
         truth = Truth.from_simulation(sim)
-        estimate = sim.log.torque_true + 0.05
-        score(estimate, truth)   # warm: imports and caches are not the row's cost
-        scoring += _timed(lambda: score(estimate, truth)) * len(group)
-        sims += sim_s * seeds
-    sims += _timed(lambda: simulate("calibration", 0)) * seeds
-    row_wall = ok["wall_s"].sum()
+        visible = sim.log.for_method(keep_ref=False)
+        for method, rows_of in group.groupby("method"):
+            instance = fitted[method, calibration_condition(condition)]
+            instance.reset(visible.spec)
+            blocks = harness.prepare_blocks(visible)
+            (estimate, ticks), spent = _cpu(lambda: harness.stream(instance.step, blocks, len(visible)))
+            stream += spent * len(rows_of)
+            _, spent = _cpu(lambda: score_row({"estimate": estimate, "ticks": ticks}, truth, len(visible), len(ticks)))
+            scoring += spent * len(rows_of)
+    measured = sims + fits + stream + scoring
     parts = [
-        ("simulations (one per scenario x condition x seed, and the calibration per seed)", sims),
-        ("fits (one per method x seed; fit_s)", fits),
-        ("rows: streaming the log through step (n_samples / samples_per_s)", stream),
-        ("rows: the rest of each row's processes (start, isolation, loading and verifying "
-         "its inputs, reset, sending the estimate)", row_wall - stream),
-        ("runner: scoring every row (measured here per scenario)", scoring),
+        ("simulations (one per scenario x condition x seed, and the calibration per calibration condition and seed)", sims),
+        ("fits (one per method x calibration condition x seed)", fits),
+        ("rows: streaming the log through step (the harness's timed loop)", stream),
+        ("rows: the rest of each row's processes (start and end, isolation and walls, inputs, unpickling the "
+         "fitted method, reset, blocks, sending the estimate) and the runner's bookkeeping", cpu_s - measured),
+        ("runner: scoring every row", scoring),
     ]
     frame = pd.DataFrame(parts, columns=["part", "cpu_s"])
-    frame["share"] = frame["cpu_s"] / frame["cpu_s"].sum()
-    return frame
+    frame["per_row_ms"] = 1e3 * frame["cpu_s"] / len(rows)
+    frame["share"] = frame["cpu_s"] / cpu_s
+    return frame, {"rows": len(rows), "seeds": n_seeds}
 
 
 def main(argv: list[str]) -> int:
-    run_dir = Path(argv[0] if argv else "runs/published")
-    frame = breakdown(run_dir)
-    prov = json.loads((run_dir / "provenance.json").read_text()) if (run_dir / "provenance.json").is_file() else {}
-    print(f"{run_dir}: {len(pd.read_csv(run_dir / 'results.csv'))} rows, wall {prov.get('wall_s', float('nan')):.0f} s, "
-          f"jobs {prov.get('jobs', '?')}\n")
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("run_dir", type=Path)
+    parser.add_argument("--cpu-s", type=float, help="the run's CPU seconds, if provenance.json lacks cpu_s")
+    args = parser.parse_args(argv)
+    path = args.run_dir / "provenance.json"
+    prov = json.loads(path.read_text()) if path.is_file() else {}
+    cpu_s = args.cpu_s if args.cpu_s is not None else prov.get("cpu_s")
+    if cpu_s is None:
+        parser.error(f"{path} records no cpu_s: give --cpu-s")
+    frame, facts = breakdown(args.run_dir, float(cpu_s))
+    cores = prov.get("cpu_count") or 2
+    print(f"{args.run_dir}: {facts['rows']} rows, {facts['seeds']} seeds; run wall {prov.get('wall_s', float('nan')):.0f} s "
+          f"with --jobs {prov.get('jobs', '?')}, {cpu_s:.0f} CPU s ({1e3 * cpu_s / facts['rows']:.1f} ms a row; "
+          f"{cpu_s / cores:.0f} s of wall time on {cores} busy cores); load average "
+          f"{prov.get('load_average', 'not recorded')}\n")
     print(frame.to_markdown(index=False, floatfmt=".3g"))
-    print(f"\ntotal {frame['cpu_s'].sum():.0f} CPU s")
     return 0
 
 

@@ -91,7 +91,7 @@ def recorded(args, body) -> int:
         from rippleb.report.provenance import collect_provenance
         from rippleb.engine.sealing import redact
 
-        start = time.perf_counter()
+        start, cpu_start, load_start = time.perf_counter(), cpu_seconds(), os.getloadavg()
         provenance = collect_provenance(redact(args.argv))  # no pointer to a salt file in the run directory
         interrupts.check_interrupted()
         completed = False
@@ -101,11 +101,21 @@ def recorded(args, body) -> int:
             return status
         finally:
             provenance["completed"] = completed
-            _record_run(args, provenance, time.perf_counter() - start)
+            provenance["load_average"] = {"start": load_start, "end": os.getloadavg()}
+            _record_run(args, provenance, time.perf_counter() - start, cpu_seconds() - cpu_start)
 
 
-def _record_run(args, provenance: dict, wall_s: float) -> None:
-    """Write DIR/provenance.json (command, code version, software, wall time) for
+def cpu_seconds() -> float:
+    """User and system CPU seconds of this process and of every process it started and
+    waited for (the fork server waits for the jobs' processes, the runner for the server)."""
+    import resource
+
+    return sum(r.ru_utime + r.ru_stime for r in (resource.getrusage(resource.RUSAGE_SELF),
+                                                  resource.getrusage(resource.RUSAGE_CHILDREN)))
+
+
+def _record_run(args, provenance: dict, wall_s: float, cpu_s: float) -> None:
+    """Write DIR/provenance.json (command, code version, software, wall and CPU time) for
     ``rippleb report``; a resumed run keeps the first command and adds its own."""
     import json
 
@@ -115,7 +125,7 @@ def _record_run(args, provenance: dict, wall_s: float) -> None:
     if out_dir is None or not getattr(args, "started", False):
         return  # the run never started (bad arguments, a refused directory): nothing to describe
     path = out_dir / "provenance.json"
-    provenance.update(jobs=args.jobs, wall_s=wall_s, finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
+    provenance.update(jobs=args.jobs, wall_s=wall_s, cpu_s=cpu_s, finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
     if args.resume is not None and path.is_file():
         from rippleb.reading import RUN_FILE_BYTES, parse_json, read_text
 
@@ -134,6 +144,7 @@ def _record_run(args, provenance: dict, wall_s: float) -> None:
                                              {"command": provenance["command"], "changes": changes,
                                               "portable": portable}]
         first["wall_s"] = (first["wall_s"] if isinstance(first.get("wall_s"), (int, float)) else 0.0) + wall_s
+        first["cpu_s"] = (first["cpu_s"] if isinstance(first.get("cpu_s"), (int, float)) else 0.0) + cpu_s
         first["completed"] = provenance["completed"]
         provenance = first
     from rippleb.files import atomic_path

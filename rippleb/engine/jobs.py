@@ -23,7 +23,7 @@ import pickle
 import traceback
 from dataclasses import dataclass
 
-from rippleb.engine.cache import Artefact, load_log, log_bytes, pack, store, unpack
+from rippleb.engine.cache import Artefact, load_log, log_bytes, pack, pack_raw, store, unpack
 from rippleb.data import SensorLog
 from rippleb.scoring import metrics
 from rippleb.scoring.metrics import Truth
@@ -193,6 +193,6 @@ def run_row(method: str, params: dict | None, calibration, evaluation, registry,
 
 
 def row_message(result: dict) -> bytes:
-    """:func:`run_row`'s result as message bytes."""
-    return pack({k: result[k] for k in ("estimate", "ticks") if k in result}, result["info"])
+    """:func:`run_row`'s result as message bytes: the estimate's float64 as they are (:func:`pack_raw`)."""
+    return pack_raw({k: result[k] for k in ("estimate", "ticks") if k in result}, result["info"])
 

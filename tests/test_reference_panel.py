@@ -4,6 +4,7 @@ rippleb/report/agreement.py): docs/metrics.md holds the record's tables, and a s
 import importlib.util
 import subprocess
 import sys
+import types
 from pathlib import Path
 
 import pytest
@@ -61,9 +62,8 @@ def test_a_small_panel_runs_and_writes_its_record_and_tables(tmp_path):
     docs = tmp_path / "metrics.md"
     docs.write_text(f"head\n{DOCS_BEGIN}\nold\n{DOCS_END}\ntail\n")
 
-    class Args:
-        scenario, out = "paper-quintic", out
-    record = panel.write(rows, Args, 60.0, record_path=tmp_path / "agreement.json", docs=docs)
+    args = types.SimpleNamespace(scenario="paper-quintic", out=out)   # the script's options
+    record = panel.write(rows, args, 60.0, record_path=tmp_path / "agreement.json", docs=docs)
     cells = {(c["reference_kind"], c["score"]): c for c in record["cells"]}
     assert cells[("model", "rms_error_rebuilt_nm")]["devices"] == 1
     assert -1.0 <= cells[("transducer", "rms_error_ref_nm")]["mean_rho"] <= 1.0

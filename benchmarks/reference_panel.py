@@ -187,8 +187,13 @@ def write(rows: list[dict], args, wall_s: float | None, record_path: Path = RECO
     from rippleb.report.agreement import DOCS_BEGIN, DOCS_END, docs_block
 
     seeds = sorted({r["seed"] for r in rows})
+    joints = sorted({(float(r["gear_ratio"]), int(r["counts_per_rev"])) for r in rows})
+    # the joints the rows hold, named in the command when they are not the whole panel
+    subset = "" if joints == [(float(a), b) for a in RATIOS for b in COUNTS] else (
+        f"--ratios {' '.join(sorted({f'{a:g}' for a, _ in joints}))} "
+        f"--counts {' '.join(sorted({str(b) for _, b in joints}))} ")
     protocol = {"command": f"python benchmarks/reference_panel.py --seeds {len(seeds)} --seed-start {seeds[0]} "
-                           f"--out {args.out}",
+                           f"{subset}--out {args.out}",
                 "scenario": args.scenario, "seeds": f"{seeds[0]}-{seeds[-1]}", "rows": len(rows),
                 "methods": len({r["method"] for r in rows}), "min_methods": MIN_METHODS,
                 "wall": "wall time not recorded" if wall_s is None else

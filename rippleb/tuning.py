@@ -100,6 +100,27 @@ def best_of(scores: list[list[float]]) -> int:
     return int(np.argmin([float(np.mean(s)) for s in scores]))
 
 
+def adopted_points(record, source: str) -> dict[str, dict]:
+    """Per method of a tuning record (``rippleb tune --out FILE``): the point the rule adopted,
+    for the methods whose best point replaced their default; an :class:`InputError` naming
+    ``source`` and the field for a record that is not one."""
+    from rippleb.errors import InputError
+
+    methods = record.get("methods") if isinstance(record, dict) else None
+    if not isinstance(methods, dict):
+        raise InputError(f"{source}: not a tuning record of 'rippleb tune --out FILE' (no 'methods' table)")
+    out = {}
+    for name, entry in methods.items():
+        adopted = entry.get("adopted") if isinstance(entry, dict) else None
+        if not isinstance(adopted, dict) or not all(isinstance(k, str) and isinstance(v, (bool, int, float, str))
+                                                    for k, v in adopted.items()):
+            raise InputError(f"{source}: methods.{name}.adopted: expected a table of parameter values, got "
+                             f"{str(adopted)[:60]}")
+        if entry.get("replaced") and adopted:
+            out[name] = adopted
+    return out
+
+
 def _record_text() -> str:
     return resources.files("rippleb.methods").joinpath(RECORD).read_text()
 

@@ -31,7 +31,8 @@ def add_tune(sub) -> None:
                     f"default and budget-1 Sobol points (seed {SEED}), each fitted and run on the "
                     "calibration log of each tuning device and scored against torque_ref (never a "
                     f"scored scenario, never torque_true). Rule: {RULE}. Prints one line per method "
-                    "and writes the record as JSON (docs/tuning.md).")
+                    "and writes the record as JSON (docs/tuning.md); 'rippleb run --tuning FILE' runs "
+                    "each method at the point the rule adopted.")
     p.add_argument("--methods", help="comma-separated method names (default: every built-in)")
     p.add_argument("--budget", type=int, default=BUDGET,
                    help=f"calibration evaluations per method (default {BUDGET}, the built-ins' budget)")
@@ -40,7 +41,8 @@ def add_tune(sub) -> None:
                         "published row uses)")
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                    help=f"points evaluated in parallel processes (default: the number of CPUs, {os.cpu_count()} here)")
-    p.add_argument("--out", type=Path, help="JSON file for the record (written after each method)")
+    p.add_argument("--out", type=Path, help="JSON file for the record (written after each method); "
+                                            "'rippleb run --tuning FILE' runs the adopted points")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_tune)
 
@@ -77,7 +79,7 @@ def cmd_tune(args) -> int:
             record["methods"][name] = entry
             if args.out is not None:
                 _write(args.out, record)
-            bar.write(line(name, entry))
+            bar.write(line(name, entry, args.out))
 
         tune(planned, seeds, args.jobs, on_method=finished, on_point=bar.update)
     if args.out is not None:
@@ -85,16 +87,23 @@ def cmd_tune(args) -> int:
     return 0
 
 
-def line(name: str, entry: dict) -> str:
-    """One method's result as one line."""
+def line(name: str, entry: dict, out: Path | None = None) -> str:
+    """One method's result as one line, ending with how to run what the rule adopted: the
+    variant's exact ``--methods`` item, or ``--tuning`` with the record ``out``."""
+    from rippleb.variants import label
+
     if entry["evaluations"] == 1:
         return f"{name}: {entry['default_score']:.3f} Nm at its defaults; {entry['note']}"
-    verdict = ("replaces the default" if entry["replaced"]
-               else "default kept" + (" (the best point is not better on every device)"
-                                      if entry["best"] != entry["default"] else ""))
     best = ", ".join(f"{k}={v:g}" for k, v in entry["best"].items())
     text = (f"{name}: default {entry['default_score']:.3f} Nm, best {entry['best_score']:.3f} Nm at "
-            f"{best} ({entry['evaluations']} evaluations): {verdict}")
+            f"{best} ({entry['evaluations']} evaluations): ")
+    if entry["replaced"]:
+        how = f" or --tuning {out}" if out is not None else " (or write the record with --out FILE and pass --tuning FILE)"
+        text += (f"better on every tuning device, adopted; its constructor's default is unchanged: run it with "
+                 f"--methods '{label(name, entry['adopted'])}'{how}")
+    else:
+        text += "default kept" + (" (the best point is not better on every device)"
+                                  if entry["best"] != entry["default"] else "")
     return text + (f"; {len(entry['errors'])} error(s): {entry['errors'][0]}" if entry["errors"] else "")
 
 

@@ -28,10 +28,8 @@ from rippleb.scoring.metrics import METRIC_COLUMNS
 from rippleb.scoring.truthfree import TRUTH_FREE_COLUMNS
 from rippleb.engine.results import RunWarning, copy_rows, row_key, swept_columns
 from rippleb.engine.sealing import sealed_text
-from rippleb.report.gear_section import gear_markdown
-from rippleb.report.layouts_section import layouts_markdown
+from rippleb.report.sections import READING_RECORDED, READING_SIMULATED, conditions_note, summary_sections
 from rippleb.report.tuning_table import tuning_markdown
-from rippleb.report.verdicts import method_verdicts
 from rippleb.report.stats import (CONFIDENCE, METHOD_ORDER, fmt_interval, interval_frame,  # noqa: F401
                                   method_order, scenario_order, t_interval, with_condition)
 from rippleb.report.table_one import (PAPER_CITATION, PAPER_TABLE_I, TABLE_I_METHODS,  # noqa: F401
@@ -90,27 +88,17 @@ def _warn_implausible(frame, path) -> None:
                       f"{'; ...' if len(bad) > 3 else ''}", RunWarning, stacklevel=3)
 
 
-def tables_markdown(frame) -> str:
+def tables_markdown(frame, joint: dict | None = None) -> str:
     """The README's tables and their sentences: a pure function of the rows, so
     ``tests/test_published.py`` can regenerate it and find it in ``results/README.md``.
-    A recorded log has its own (:mod:`rippleb.report.recorded`)."""
+    A recorded log has its own (:mod:`rippleb.report.recorded`; ``joint``: its joint as
+    ``run.json`` records it)."""
     if is_recorded(frame):
         from rippleb.report.recorded import recorded_tables_markdown
 
-        return recorded_tables_markdown(frame)
+        return recorded_tables_markdown(frame, joint)
     source = "Recorded" if is_recorded(frame) else "Simulated"
-    parts = ["## Method x condition (mean `rms_error_nm` over the scenarios, 95 % interval)", "",
-             "Per seed (device), the mean RMS error over the scenarios every method finished under "
-             "that condition; then mean ± 95 % t-interval over seeds.", "",
-             condition_summary_markdown(frame), ""]
-    parts += [f"- {s}" for s in condition_headline(frame)] + [""]
-    parts += gear_markdown(frame) + layouts_markdown(frame)
-    verdicts = method_verdicts(frame)
-    if verdicts:
-        parts += ["### Each method in plain words", "",
-                  "Where it wins and where it breaks, from the table above; why, from what the "
-                  "method assumes of the ripple (its page under docs/methods/).", ""]
-        parts += [f"- {v}" for v in verdicts] + [""]
+    parts = summary_sections(frame)
     for condition, rows in by_condition(frame):
         parts += _condition_section(condition, rows, source)
     parts += ["## Rows that did not finish ok", "", failed_markdown(frame)]
@@ -192,59 +180,6 @@ def _plain(value):
     return value.item() if isinstance(value, np.generic) else value
 
 
-# What the tables can and cannot say; no numbers here, so nothing in it can go stale.
-READING_SIMULATED = """## Reading these tables
-
-- Every number comes from the simulator (`docs/physics.md`), not from a real joint. Its
-  ripple has the wave-generator orders 1, 2, 4, 6 and 8 with amplitudes affine in the load
-  and a small load-dependent phase, plus components locked to the output angle and strain
-  hysteresis. Under `same-session` the wave-generator part is exactly what the
-  calibration-map methods (`kalman-ripple`, `angle-adaptive-frozen`) identify on the
-  calibration log of the same device, so their result there is the best case for
-  model-based cancellation. The other conditions show what happens when the device has
-  changed since calibration: a power cycle loses the absolute angle until the first index
-  pulse, ageing drifts the map, re-assembly redraws it (`docs/physics.md`, "Deployment
-  conditions").
-- Under every condition, calibration included, the gear has its transmission error: a
-  position error of the wave-generator angle (twice per turn dominant) that puts **real**
-  torque at orders 1 and 2, the ripple's own, through the joint's dynamics
-  (`docs/physics.md`, "Transmission error"). `torque_ref` does not know it. A method that
-  removes everything at those orders removes it too and is charged for it in
-  `rms_error_nm`; `gear_removed_fraction` and `rms_error_without_gear_nm` say what each
-  method did with it.
-- `realistic` is the same joint as `same-session` with the physics no method models turned on
-  at their documented sizes, in the calibration session too: gauge dynamics that change the
-  ripple with speed, a ripple that saturates with load, changes with the loaded tooth flank
-  and follows the load's history, ripple at orders no method models (3 and the wave
-  generator bearing's 9.24), gauge warm-up within the session, an anti-alias filter and PWM
-  pickup before the ADC, encoder edge errors, eccentricity and missed counts
-  (`docs/physics.md`, "Beyond the methods' models"); its position loop is today's. It is where a method that wins only because the simulator's ripple has
-  the form it assumes would be found out; `results/sweeps/` varies each effect alone.
-- `torque_ref` (Table I's reference) is the paper's eq. (7) on the desired trajectory with
-  a nominal arm model whose masses and inertias differ from the simulated arm's by a few
-  per cent, as an identification leaves them.
-- `order-tracking` switches to the dead zone when no encoder position is crossed within
-  its trigger timeout, chosen on the calibration scenario (`docs/methods/order-tracking.md`).
-- `delay_ms` is the lag that best correlates estimate and truth, `n/a` where the
-  correlation peak is not distinct (slowly varying torque); `step_latency_ms` and
-  `bandwidth_hz` measure latency and bandwidth where the scenario defines them
-  (`docs/metrics.md`).
-- Timing columns depend on the machine and its load; compare methods within one run."""
-
-READING_RECORDED = """## Reading these tables
-
-- Every number comes from the recorded log named in the scenario column (`log:NAME`),
-  scored against its `torque_ref` column where it has one (and `torque_true` where the log
-  has one); one log is one device, so there are no intervals over devices.
-- Every row also has the truth-free scores (`ripple_wg_nm`, `rest_std_nm`,
-  `strain_delay_ms`), computed from the estimate, the strain and the encoder alone; a log
-  without any reference is ranked by them. Each measures one symptom, not the error
-  (below, and `docs/metrics.md`, "Scores without ground truth").
-- The `calibration` column of `results.csv` says what each method was fitted on; `self`
-  means the scored log itself, which is not a fair test of any method.
-- Timing columns depend on the machine and its load; compare methods within one run."""
-
-
 def readme_markdown(frame, prov: dict, figures: dict, *, published: bool = False,
                     run_dir: str = "DIR") -> str:
     """``README.md`` of a report: every number from ``frame`` or ``prov``.
@@ -255,10 +190,12 @@ def readme_markdown(frame, prov: dict, figures: dict, *, published: bool = False
     recorded = is_recorded(frame)
     parts = title_lines(published, recorded, run_dir) + ["", counts_sentence(frame, recorded),
                                                          "", environment_sentence(prov.get("run", {}))]
+    note = conditions_note(frame)
+    parts += ["", note] if note else []
     if not recorded:
         parts += ["", prov.get("sealed") or sealed_text(frame, prov.get("run", {}))]
     parts += ["", READING_RECORDED if recorded else READING_SIMULATED]
-    parts += ["", tables_markdown(frame)]
+    parts += ["", tables_markdown(frame, prov.get("run", {}).get("joint"))]
     if not recorded:
         parts += ["", "## How each method was tuned", "",
                   tuning_markdown(prov.get("run", {}).get("tuning"), method_order(frame["method"]))]

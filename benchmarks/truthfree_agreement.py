@@ -11,8 +11,11 @@ are defined (at least 3 methods with a finite value), as the Markdown table of
 ``docs/metrics.md``; then the same without the methods that do not read the strain, and
 per scenario over every condition.
 
-    python benchmarks/truthfree_agreement.py --seeds 2 --jobs 1 --out runs/truthfree
+    python benchmarks/truthfree_agreement.py --seeds 2 --seed-start 3100 --jobs 1 --out runs/truthfree
     python benchmarks/truthfree_agreement.py --rows runs/truthfree/results.csv   # table only
+
+Use devices no method was developed on (``--seed-start 3100``: the public seeds 0-99 are the
+development devices).
 """
 
 import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
@@ -72,6 +75,7 @@ def agreement_table(frame: pd.DataFrame, by: str = "condition") -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=2, help="devices per condition (default 2)")
+    parser.add_argument("--seed-start", type=int, default=3100, help="first device (default 3100: fresh devices)")
     parser.add_argument("--jobs", type=int, default=1, help="rows at once (default 1)")
     parser.add_argument("--out", help="run directory to keep the rows in (default: memory only)")
     parser.add_argument("--rows", help="a results.csv to read instead of running")
@@ -79,7 +83,8 @@ def main() -> None:
     if args.rows:
         frame = pd.read_csv(args.rows)
     else:
-        frame = rippleb.run(seeds=args.seeds, conditions="all", jobs=args.jobs, out=args.out)
+        frame = rippleb.run(seeds=args.seeds, seed_start=args.seed_start, conditions="all", jobs=args.jobs,
+                            out=args.out)
     print(f"{len(frame)} rows, {frame['seed'].nunique()} seeds, "
           f"{frame['scenario'].nunique()} scenarios, {frame['method'].nunique()} methods\n")
     print(agreement_table(frame))

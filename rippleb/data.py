@@ -277,18 +277,20 @@ def read_log(path: str | Path, spec: JointSpec | None = None, *, joint=None,
     spec
         The joint the log was recorded on, used as it is (a joint description that gives
         another value is refused). By default :class:`JointSpec`
-        with the values the joint description gives and ``fs`` the mean rate of ``t``
+        with the values the joint description gives and ``fs`` the rate of ``t``'s clock
         (:func:`rippleb.timebase.uniform_rate`).
     joint
         A :class:`~rippleb.joint_file.JointDescription` or the path of a ``joint.toml``;
         the log's sidecar (``rec.toml`` beside ``rec.csv``) overrides it key by key.
     resample
-        Put a log whose time stamps jitter on a uniform grid at its mean rate
-        (:func:`rippleb.timebase.resample`); without it such a log is refused.
+        Put a log whose time stamps jitter, or that dropped samples, on a uniform grid at its
+        clock's rate (:func:`rippleb.timebase.resample`); without it such a log is refused.
 
-    ``meta["joint"]`` lists, per value the log is read with, whether it was given or assumed.
+    ``meta["joint"]`` lists, per value the log is read with, whether it was given or assumed,
+    and what the log's own checks found (:mod:`rippleb.joint_checks`: a contradicted value is
+    an :class:`InputError`); ``meta["reference_kind"]``, what its ``torque_ref`` is.
     """
-    from rippleb import joint_file
+    from rippleb import joint_checks, joint_file
 
     path = Path(path)
     suffix = path.suffix.lower()
@@ -314,14 +316,16 @@ def read_log(path: str | Path, spec: JointSpec | None = None, *, joint=None,
     if spec is not None:
         joint_file.check_agrees(spec, description, str(path))
     log = make_log(spec or _spec_from(description, columns, str(path)), columns, source=str(path),
-                   meta={"source": str(path)})
+                   meta={"source": str(path), "reference_kind": description.reference_kind,
+                         "columns": {k: f"{v['column']!r} in {v['unit']}" for k, v in units.items()}})
+    notes = joint_checks.notes(log, description, str(path), spec_given=spec is not None)
     log.meta["joint"] = joint_file.describe(log.spec, description, units, log.index is not None,
-                                            spec_given=spec is not None)
+                                            spec_given=spec is not None, notes=notes)
     return log
 
 
 def _spec_from(description, columns: dict, source: str) -> JointSpec:
-    """:class:`JointSpec` with the values ``description`` gives and ``fs`` the mean rate of ``t``."""
+    """:class:`JointSpec` with the values ``description`` gives and ``fs`` the rate of ``t``."""
     from rippleb import joint_file
 
     spec = joint_file.with_spec(JointSpec(), description)
@@ -336,7 +340,7 @@ def _spec_from(description, columns: dict, source: str) -> JointSpec:
 
 
 def _rate(t) -> float:
-    """The mean rate of a ``t`` column, NaN if it is not numeric (make_log names the column)."""
+    """The rate of a ``t`` column, NaN if it is not numeric (make_log names the column)."""
     if t is None:
         return float("nan")
     try:

@@ -13,6 +13,12 @@ and units onto rippleb's (docs/your-joint.md has the full format)::
     strain = {column = "strain_mV", unit = "mV"}
     encoder = "enc_counts"            # a name alone: the column is in rippleb's unit
 
+A ``[joint.reference]`` table says what the log's ``torque_ref`` is (:data:`REFERENCE_KINDS`):
+a torque sensor in series with the joint, which reads the real torque, or a model torque
+(eq. (7) of the paper), which lacks every torque the model leaves out, the gear's own
+among them; the two are scored differently (docs/metrics.md, "Scores against a
+reference"). A log without a reference says so with ``torque_ref = false``.
+
 It comes from ``--joint FILE`` (:func:`load_joint`) and from the log's sidecar
 ``<log stem>.toml`` beside it (:func:`sidecar_of`), whose keys win: a sidecar describes
 its one file. :func:`describe` says, per value, whether it was given or assumed.
@@ -51,6 +57,18 @@ COLUMN_UNITS = {
 RIPPLEB_UNITS = {"t": "s", "strain": "V", "current": "A", "encoder": "counts", "index": "pulse",
                  "torque_ref": "Nm", "torque_true": "Nm"}
 _ENTRY_KEYS = ("column", "unit", "scale")
+#: Columns a log may lack; ``NAME = false`` in ``[joint.columns]`` says this log has none.
+OPTIONAL_COLUMNS = ("index", "torque_ref", "torque_true")
+#: What a log's ``torque_ref`` may be (``[joint.reference] kind``).
+REFERENCE_KINDS = {
+    "transducer": "a torque sensor in series with the joint: the real torque, with the sensor's own noise "
+                  "and bandwidth",
+    "model": "a model torque (eq. (7) or any model): without the gear's own torque and whatever else the "
+             "model leaves out",
+}
+#: The kind assumed when none is given: scored as a model torque, whose score does not reward
+#: erasing real torque a model lacks; a transducer's log loses little by it (docs/metrics.md).
+DEFAULT_REFERENCE_KIND = "model"
 
 
 @dataclass(frozen=True)
@@ -64,6 +82,7 @@ class Column:
     name: str
     unit: str = ""
     scale: float = 1.0
+    absent: bool = False   # ``NAME = false``: the log has no such column
 
 
 @dataclass(frozen=True)
@@ -73,11 +92,17 @@ class JointDescription:
     values: dict = field(default_factory=dict)
     columns: dict = field(default_factory=dict)
     sources: dict = field(default_factory=dict)
+    reference: dict = field(default_factory=dict)
 
     def merged(self, over: "JointDescription") -> "JointDescription":
         """This description with every value and column ``over`` gives replaced by its own."""
         return JointDescription({**self.values, **over.values}, {**self.columns, **over.columns},
-                                {**self.sources, **over.sources})
+                                {**self.sources, **over.sources}, {**self.reference, **over.reference})
+
+    @property
+    def reference_kind(self) -> str:
+        """The declared kind of ``torque_ref``, else :data:`DEFAULT_REFERENCE_KIND`."""
+        return self.reference.get("kind", DEFAULT_REFERENCE_KIND)
 
 
 def load_joint(path: str | Path, *, sidecar: bool = False) -> JointDescription:
@@ -103,19 +128,36 @@ def load_joint(path: str | Path, *, sidecar: bool = False) -> JointDescription:
 
 
 def _description(path: Path, table: dict) -> JointDescription:
-    values, columns = {}, {}
+    values, columns, reference = {}, {}, {}
     for key, value in table.items():
         if key == "columns":
             if not isinstance(value, dict):
                 raise InputError(f"{path}: joint.columns: must be a table")
             columns = {name: _column(path, name, entry) for name, entry in value.items()}
+        elif key == "reference":
+            reference = _reference(path, value)
         elif key in JOINT_KEYS:
             values[key] = _joint_value(path, key, value)
         else:
             raise InputError(f"{path}: joint.{key}: unknown key; known: "
-                             f"{', '.join(list(JOINT_KEYS) + ['columns'])}")
-    sources = {**{k: str(path) for k in values}, **{f"columns.{k}": str(path) for k in columns}}
-    return JointDescription(values, columns, sources)
+                             f"{', '.join(list(JOINT_KEYS) + ['columns', 'reference'])}")
+    sources = {**{k: str(path) for k in values}, **{f"columns.{k}": str(path) for k in columns},
+               **{f"reference.{k}": str(path) for k in reference}}
+    return JointDescription(values, columns, sources, reference)
+
+
+def _reference(path: Path, table) -> dict:
+    """The ``[joint.reference]`` table: ``kind``, one of :data:`REFERENCE_KINDS`."""
+    if not isinstance(table, dict):
+        raise InputError(f"{path}: joint.reference: must be a table, e.g. kind = \"transducer\"")
+    unknown = [k for k in table if k != "kind"]
+    if unknown:
+        raise InputError(f"{path}: joint.reference.{unknown[0]}: unknown key; known: kind")
+    kind = table.get("kind")
+    if kind not in REFERENCE_KINDS:
+        raise InputError(f"{path}: joint.reference.kind: {kind!r} is not a kind of reference; use "
+                         + "; or ".join(f"{k!r} ({v})" for k, v in REFERENCE_KINDS.items()))
+    return {"kind": kind}
 
 
 def _joint_value(path: Path, key: str, value):
@@ -142,10 +184,13 @@ def _column(path: Path, name: str, entry) -> Column:
     if unit_kind(name) not in COLUMN_UNITS:
         raise InputError(f"{where}: unknown column; rippleb's columns: {', '.join(COLUMN_UNITS)} "
                          f"and the strain channels strain_1, strain_2, ...")
+    if entry is False and name in OPTIONAL_COLUMNS:
+        return Column("", absent=True)
     if isinstance(entry, str):
         entry = {"column": entry}
     if not isinstance(entry, dict):
-        raise InputError(f"{where}: must be a column name or a table {{column = ..., unit = ...}}")
+        raise InputError(f"{where}: must be a column name or a table {{column = ..., unit = ...}}"
+                         + (" (or false: the log has none)" if name in OPTIONAL_COLUMNS else ""))
     unknown = [k for k in entry if k not in _ENTRY_KEYS]
     if unknown:
         raise InputError(f"{where}.{unknown[0]}: unknown key; known: {', '.join(_ENTRY_KEYS)}")
@@ -204,9 +249,13 @@ def map_columns(frame, joint: JointDescription, source: str, wanted: tuple[str, 
     columns, units = {}, {}
     for name in wanted:
         mapped = joint.columns.get(name)
+        if mapped is not None and mapped.absent:
+            continue
         if mapped is not None and mapped.name not in frame.columns:
+            hint = (f"; if {source} has none, say so in its sidecar {sidecar_of(source).name}: "
+                    f"[joint.columns] {name} = false" if name in OPTIONAL_COLUMNS else "")
             raise InputError(f"{joint.sources[f'columns.{name}']}: joint.columns.{name}: {source} has no "
-                             f"column {mapped.name!r} (its columns: {', '.join(map(str, frame.columns))})")
+                             f"column {mapped.name!r} (its columns: {', '.join(map(str, frame.columns))}){hint}")
         column = mapped or Column(name, RIPPLEB_UNITS[unit_kind(name)])
         if column.name not in frame.columns:
             continue
@@ -225,6 +274,8 @@ def _refuse_shared_columns(joint: JointDescription) -> None:
     strain read as the current too gave ``ok`` rows of a joint that does not exist)."""
     seen: dict[str, str] = {}
     for name, column in joint.columns.items():
+        if column.absent:   # ``NAME = false`` maps no column of the log
+            continue
         if column.name in seen:
             raise InputError(f"{joint.sources[f'columns.{name}']}: joint.columns: {seen[column.name]} and {name} "
                              f"both map the log's column {column.name!r}; each of rippleb's columns is one of "
@@ -266,24 +317,37 @@ def spec_values(joint: JointDescription) -> dict:
 
 
 def describe(spec, joint: JointDescription, units: dict, index_used: bool, *,
-             spec_given: bool = False) -> list[str]:
+             spec_given: bool = False, notes: dict | None = None) -> list[str]:
     """One line per value a log run uses: given (and where) or assumed (the default).
 
-    ``spec_given``: ``spec`` was handed to ``read_log``, so its values are the caller's."""
+    ``spec_given``: ``spec`` was handed to ``read_log``, so its values are the caller's.
+    ``notes``: per key, what the checks of the log found (:mod:`rippleb.joint_checks`),
+    appended to its line."""
+    notes = notes or {}
     default = "given as read_log's spec" if spec_given else "ASSUMED (rippleb's default)"
-    rate_origin = default if spec_given else "from column t, its mean rate"
-    lines = [f"  fs = {spec.fs:.6g} Hz ({rate_origin})"]
+    rate_origin = default if spec_given else "from column t: the rate of its clock"
+    lines = [f"  fs = {spec.fs:.6g} Hz ({rate_origin}{_note(notes, 'fs')})"]
     for key in JOINT_KEYS:
         value = index_used if key == "index_pulse" else getattr(spec, key)
         origin = f"given in {joint.sources[key]}" if key in joint.sources else default
         if key == "index_pulse" and key not in joint.sources:
             origin = "ASSUMED (from whether the log has an index column)"
+        origin += _note(notes, key)
         lines.append(f"  {key} = {value:g} ({origin})" if not isinstance(value, bool)
                      else f"  {key} = {str(value).lower()} ({origin})")
     for name, info in units.items():
         origin = f"given in {info['given']}" if info["given"] else "ASSUMED (rippleb's name and unit)"
         lines.append(f"  column {name} = {info['column']!r} in {info['unit']} ({origin})")
+    if "torque_ref" in units:
+        kind = joint.reference_kind
+        origin = (f"given in {joint.sources['reference.kind']}" if "reference.kind" in joint.sources
+                  else 'ASSUMED: declare it in [joint.reference] kind = "transducer" or "model"')
+        lines.append(f"  reference kind = {kind} ({origin}): torque_ref is {REFERENCE_KINDS[kind]}")
     return lines
+
+
+def _note(notes: dict, key: str) -> str:
+    return f"; {notes[key]}" if key in notes else ""
 
 
 def check_agrees(spec, joint: JointDescription, source: str) -> None:

@@ -42,9 +42,14 @@ KINDS = ("log", "linear", "int")
 SEED = 33
 #: Calibration evaluations per method (the default and 15 Sobol points); docs/tuning.md.
 BUDGET = 16
-#: The tuning devices, one calibration log each: 20 public seeds that no development check
-#: uses (those are 0-99) and no publication can (its devices are drawn from a sealed salt).
-SEEDS = tuple(range(100, 120))
+#: The paired rule's tuning devices, one calibration log each: 20 public seeds that no
+#: development check uses (those are 0-99) and no publication can (its devices are drawn from
+#: a sealed salt); 20, so that the signed-rank test can pass after Holm over 15 points.
+PAIRED_SEEDS = tuple(range(100, 120))
+#: The devices of the built-ins' record (``methods/tuning.json``), made by the former rule:
+#: the first five of :data:`PAIRED_SEEDS`. ``rippleb tune``'s default until the built-ins
+#: are re-tuned under :data:`RULE_ID` (docs/tuning.md, "Re-tuning under the paired rule").
+SEEDS = PAIRED_SEEDS[:5]
 CRITERION = ("mean rms_error_ref_nm (against torque_ref) of the method fitted on the calibration "
              "log of each tuning device and run on that same log")
 #: The rule, by name (a record keeps it in ``protocol.rule_id``) and in words.
@@ -53,9 +58,17 @@ RULE = ("a point replaces the default only when the one-sided Wilcoxon signed-ra
         "per-device differences from the default says it is lower, at 5 % after Holm's correction over "
         "the budget-1 points tried; of the points that pass, the one of lowest mean; otherwise the "
         "default stays")
-#: The rule of the records made before :data:`RULE_ID` (they name none): the point of lowest
+#: The former rule (records made before :data:`RULE_ID` name none): the point of lowest
 #: mean, only when better on every tuning device.
 EVERY_DEVICE = "every-device"
+EVERY_DEVICE_RULE = ("the point of lowest mean replaces the default only when it is better on every tuning "
+                     "device (paired); otherwise the default stays")
+#: The rules ``rippleb tune --rule`` runs, by name, in words.
+RULES = {RULE_ID: RULE, EVERY_DEVICE: EVERY_DEVICE_RULE}
+#: The rule of the built-ins' record, ``rippleb tune``'s default: the record was made by the
+#: former rule on :data:`SEEDS`, and re-tuning every built-in under :data:`RULE_ID` on
+#: :data:`PAIRED_SEEDS` (which changes defaults, and so every published row) is not done yet.
+PROTOCOL_RULE = EVERY_DEVICE
 #: The record of the built-ins' tuning, in the methods package.
 RECORD = "tuning.json"
 
@@ -145,6 +158,27 @@ def best_of(scores: list[list[float]]) -> int:
 def rule_of(record: dict) -> str:
     """The rule a record was made by (records older than :data:`RULE_ID` name none)."""
     return record.get("protocol", {}).get("rule_id", EVERY_DEVICE)
+
+
+def adopted_points(record, source: str) -> dict[str, dict]:
+    """Per method of a tuning record (``rippleb tune --out FILE``): the point the rule adopted,
+    for the methods whose best point replaced their default; an :class:`InputError` naming
+    ``source`` and the field for a record that is not one."""
+    from rippleb.errors import InputError
+
+    methods = record.get("methods") if isinstance(record, dict) else None
+    if not isinstance(methods, dict):
+        raise InputError(f"{source}: not a tuning record of 'rippleb tune --out FILE' (no 'methods' table)")
+    out = {}
+    for name, entry in methods.items():
+        adopted = entry.get("adopted") if isinstance(entry, dict) else None
+        if not isinstance(adopted, dict) or not all(isinstance(k, str) and isinstance(v, (bool, int, float, str))
+                                                    for k, v in adopted.items()):
+            raise InputError(f"{source}: methods.{name}.adopted: expected a table of parameter values, got "
+                             f"{str(adopted)[:60]}")
+        if entry.get("replaced") and adopted:
+            out[name] = adopted
+    return out
 
 
 def _record_text() -> str:

@@ -156,7 +156,7 @@ def _table_lines(text: str) -> list[str]:
 def test_a_bar_in_a_scenario_name_stays_in_its_cell(run_copy, capsys):
     import re
 
-    from rippleb.report.html_report import _markdown_table
+    from rippleb.report.markdown_html import table_html
 
     assert main(["report", str(run_copy), "--no-figures", "--html"]) == 0
     readme = (run_copy / "report" / "README.md").read_text()
@@ -172,7 +172,7 @@ def test_a_bar_in_a_scenario_name_stays_in_its_cell(run_copy, capsys):
     for table in tables:   # every row of a table has as many cells as its header
         counts = {len(re.split(r"(?<!\\)\|", line)) for line in table}
         assert len(counts) == 1, table
-    html = _markdown_table("\n".join(next(t for t in tables if any("a\\|b" in line for line in t))))
+    html = table_html("\n".join(next(t for t in tables if any("a\\|b" in line for line in t))))
     assert ">a|b<" in html and "a\\|b" not in html
     assert "a|b" in (run_copy / "report" / "index.html").read_text()
 

@@ -14,7 +14,7 @@ from rippleb import InputError, JointSpec, read_log
 from rippleb.joint_file import description_for, load_joint
 from rippleb.scoring.metrics import Truth
 from rippleb.scoring.scorable import NO_REFERENCE, implausible
-from rippleb.timebase import check_steps, resample, to_seconds, uniform_rate
+from rippleb.timebase import check_steps, resample, sample_periods, to_seconds, uniform_rate
 from rippleb.scoring.row import score_or_invalid
 
 FS = 20_000.0
@@ -65,11 +65,11 @@ def test_a_joint_file_renames_scales_and_sets_the_spec(tmp_path):
 def test_without_a_joint_file_every_value_is_said_to_be_assumed(tmp_path):
     _frame().to_csv(tmp_path / "rec.csv", index=False)
     said = "\n".join(read_log(tmp_path / "rec.csv").meta["joint"])
-    assert "counts_per_rev = 2500 (ASSUMED (rippleb's default))" in said
+    assert "counts_per_rev = 2500 (ASSUMED (rippleb's default); not checked: the log has no index pulse" in said
     assert "column strain = 'strain' in V (ASSUMED" in said
     assert "index_pulse = false (ASSUMED" in said
     given = "\n".join(read_log(tmp_path / "rec.csv", spec=JointSpec(counts_per_rev=16384)).meta["joint"])
-    assert "counts_per_rev = 16384 (given as read_log's spec)" in given and "(ASSUMED (rippleb's default))" not in given
+    assert "counts_per_rev = 16384 (given as read_log's spec;" in given and "(ASSUMED (rippleb's default)" not in given
 
 
 def test_a_sidecar_overrides_the_joint_file_key_by_key(tmp_path):
@@ -161,6 +161,19 @@ def test_a_gap_is_refused_even_when_resampling():
         check_steps(t, "rec.csv", resampling=True)
 
 
+def test_dropped_samples_do_not_move_the_rate_and_get_their_grid_points_back():
+    """Issue 39: 2 % of isolated dropped samples at 20 kHz read 19 600 Hz; the clock's rate is 20 kHz."""
+    t = np.arange(20_000) / FS
+    rng = np.random.default_rng(4)
+    kept = np.ones(len(t), bool)
+    kept[rng.choice(np.arange(1, len(t) - 1, 3), 400, replace=False)] = False   # isolated: never two in a row
+    assert uniform_rate(t[kept]) == pytest.approx(FS, rel=1e-12)
+    assert (len(t[kept]) - 1) / (t[-1] - t[0]) == pytest.approx(0.98 * FS, rel=1e-3)   # what the mean rate said
+    out = resample({"t": t[kept], "strain": 2.0 * t[kept], "encoder": np.arange(len(t))[kept]})
+    np.testing.assert_allclose(out["t"], t, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out["strain"], 2.0 * t, atol=1e-12)
+
+
 @settings(max_examples=40, deadline=None, derandomize=True)
 @given(n=st.integers(3, 400), sd=st.floats(0.0, 8e-6), seed=st.integers(0, 99))
 def test_resampling_keeps_span_count_counts_and_pulses(n, sd, seed):
@@ -170,8 +183,10 @@ def test_resampling_keeps_span_count_counts_and_pulses(n, sd, seed):
     encoder = np.cumsum(np.random.default_rng(seed).integers(0, 3, n))
     index = (np.arange(n) % 50 == 7).astype(np.int8)
     out = resample({"t": t, "strain": 2.0 * t, "encoder": encoder, "index": index})
-    assert len(out["t"]) == n and out["t"][0] == t[0] and out["t"][-1] == t[-1]
-    np.testing.assert_allclose(np.diff(out["t"]), (t[-1] - t[0]) / (n - 1), rtol=1e-6)
+    periods = sample_periods(t)
+    assert len(out["t"]) == periods + 1 and out["t"][0] == t[0] and out["t"][-1] == t[-1]
+    assert periods == n - 1   # jitter, no dropped sample: every stamp keeps its period
+    np.testing.assert_allclose(np.diff(out["t"]), (t[-1] - t[0]) / periods, rtol=1e-6)
     assert uniform_rate(out["t"]) == pytest.approx(uniform_rate(t))
     np.testing.assert_allclose(out["strain"], 2.0 * out["t"], atol=1e-12)   # linear: exact on a line
     assert set(out["encoder"]) <= set(encoder) and (np.diff(out["encoder"]) >= 0).all()
@@ -220,27 +235,31 @@ def test_a_calibration_sidecar_that_names_another_joint_is_refused(tmp_path):
 
 def test_lab_columns_and_their_joint_file_read_back_as_the_log(tmp_path):
     """What ``rippleb simulate --format lab`` writes reads back, through its joint.toml, as
-    the log it came from; a joint.toml that says something else is kept and refused."""
+    the log it came from, its reference named and declared for what it is; a joint.toml that
+    says something else is kept and refused."""
     from rippleb import make_log
     from rippleb.data import write_columns
     from rippleb.lab_format import joint_toml, lab_columns, write_joint_toml
 
     frame = _frame(4000)
-    log = make_log(JointSpec(counts_per_rev=16384), {**frame.to_dict("series"), "index": frame.encoder % 97 == 0,
-                                                    "torque_true": frame.torque_ref})
-    columns = lab_columns(log)
-    assert list(columns) == ["t", "strain_mV", "enc_counts", "i_motor_A", "idx", "load_cell_Nm"]   # no truth
-    write_columns(columns, tmp_path / "rec.csv")
-    joint = write_joint_toml(joint_toml(log.spec, True), tmp_path / "joint.toml")
-    back = read_log(tmp_path / "rec.csv", joint=joint)
-    assert back.spec == log.spec and back.torque_true is None
-    for name in ("t", "strain", "current", "torque_ref"):
-        np.testing.assert_allclose(getattr(back, name), getattr(log, name), rtol=1e-12, atol=1e-15)
-    np.testing.assert_array_equal(back.encoder, log.encoder)
-    np.testing.assert_array_equal(back.index, log.index)
-    assert write_joint_toml(joint_toml(log.spec, True), joint) == joint   # the same text: fine
+    log = make_log(JointSpec(counts_per_rev=97), {**frame.to_dict("series"), "index": frame.encoder % 97 == 0,
+                                                 "torque_true": frame.torque_ref})
+    for kind, column in (("transducer", "torque_sensor_Nm"), ("model", "model_torque_Nm")):
+        columns = lab_columns(log, kind)
+        assert list(columns) == ["t", "strain_mV", "enc_counts", "i_motor_A", "idx", column]   # no truth
+        write_columns(columns, tmp_path / f"{kind}.csv")
+        (tmp_path / kind).mkdir()
+        joint = write_joint_toml(joint_toml(log.spec, True, kind), tmp_path / kind / "joint.toml")
+        back = read_log(tmp_path / f"{kind}.csv", joint=joint)
+        assert back.spec == log.spec and back.torque_true is None and back.meta["reference_kind"] == kind
+        for name in ("t", "strain", "current", "torque_ref"):
+            np.testing.assert_allclose(getattr(back, name), getattr(log, name), rtol=1e-12, atol=1e-15)
+        np.testing.assert_array_equal(back.encoder, log.encoder)
+        np.testing.assert_array_equal(back.index, log.index)
+        assert f"reference kind = {kind} (given in" in "\n".join(back.meta["joint"])
+    assert write_joint_toml(joint_toml(log.spec, True, "model"), joint) == joint   # the same text: fine
     with pytest.raises(InputError, match="joint.toml: exists and describes another joint"):
-        write_joint_toml(joint_toml(JointSpec(), True), joint)
+        write_joint_toml(joint_toml(log.spec, True, "transducer"), joint)
 
 
 def test_a_control_rate_above_the_sample_rate_is_named(tmp_path):
@@ -248,3 +267,73 @@ def test_a_control_rate_above_the_sample_rate_is_named(tmp_path):
     path = _joint(tmp_path, "[joint]\ncontrol_rate = 40000.0\n")
     with pytest.raises(InputError, match=r"joint.toml: joint.control_rate: 40000 Hz exceeds .*rec.csv's sample rate, 20000 Hz"):
         read_log(tmp_path / "rec.csv", joint=path)
+
+
+def test_a_reference_declares_its_kind_and_a_bad_kind_is_one_line(tmp_path):
+    _frame().to_csv(tmp_path / "rec.csv", index=False)
+    log = read_log(tmp_path / "rec.csv", joint=_joint(tmp_path, '[joint.reference]\nkind = "transducer"\n'))
+    assert log.meta["reference_kind"] == "transducer"
+    assert "reference kind = transducer (given in" in "\n".join(log.meta["joint"])
+    said = "\n".join(read_log(tmp_path / "rec.csv").meta["joint"])
+    assert 'reference kind = model (ASSUMED: declare it in [joint.reference] kind = "transducer" or "model")' in said
+    with pytest.raises(InputError, match=r"joint.reference.kind: 'loadcell' is not a kind of reference; use "
+                                         r"'transducer' \(a torque sensor in series"):
+        load_joint(_joint(tmp_path, '[joint.reference]\nkind = "loadcell"\n'))
+    with pytest.raises(InputError, match="joint.reference.bandwidth: unknown key; known: kind"):
+        load_joint(_joint(tmp_path, '[joint.reference]\nkind = "model"\nbandwidth = 3\n'))
+
+
+def test_a_log_without_the_shared_reference_column_is_told_its_sidecar_fixes_it(tmp_path):
+    """Issue 39: a scored log without a reference beside a joint.toml that maps one was refused
+    with no hint; its sidecar's ``torque_ref = false`` reads it as a log without one."""
+    _frame().drop(columns="torque_ref").to_csv(tmp_path / "rec.csv", index=False)
+    joint = _joint(tmp_path, '[joint.columns]\ntorque_ref = "load_Nm"\n')
+    with pytest.raises(InputError, match=r"joint.toml: joint.columns.torque_ref: .*rec.csv has no column 'load_Nm' "
+                                         r"\(its columns: .*\); if .*rec.csv has none, say so in its sidecar "
+                                         r"rec.toml: \[joint.columns\] torque_ref = false"):
+        read_log(tmp_path / "rec.csv", joint=joint)
+    _joint(tmp_path, "[joint.columns]\ntorque_ref = false\n", "rec.toml")
+    assert read_log(tmp_path / "rec.csv", joint=joint).torque_ref is None
+    with pytest.raises(InputError, match=r"joint.columns.strain: must be a column name or a table"):
+        load_joint(_joint(tmp_path, "[joint.columns]\nstrain = false\n"))
+
+
+def test_counts_per_rev_that_the_index_pulses_contradict_is_refused_naming_the_value(tmp_path):
+    """Issue 39: a 4096-count encoder read as 2500 counts was scored, 14 of 14 rows ok."""
+    n = 40_000
+    encoder = np.arange(n) // 2 + 123                      # 10 kHz of counts: 4.9 revolutions
+    frame = _frame(n).assign(encoder=encoder, index=(encoder % 4096 == 7).astype(int))
+    frame.to_csv(tmp_path / "rec.csv", index=False)
+    with pytest.raises(InputError, match=r"joint.toml: joint.counts_per_rev: 2500, but .*rec.csv's index pulses "
+                                         r"are 4096 counts apart \(\d+ revolutions\): the encoder has 4096 counts "
+                                         r"per revolution; give counts_per_rev = 4096"):
+        read_log(tmp_path / "rec.csv", joint=_joint(tmp_path, "[joint]\ncounts_per_rev = 2500\n"))
+    with pytest.raises(InputError, match=r"rec.csv: counts_per_rev = 2500 \(ASSUMED: rippleb's default"):
+        read_log(tmp_path / "rec.csv")
+    said = "\n".join(read_log(tmp_path / "rec.csv", joint=_joint(tmp_path, "[joint]\ncounts_per_rev = 4096\n",
+                                                                  "j2.toml")).meta["joint"])
+    assert "counts_per_rev = 4096 (given in" in said and "agrees with the index pulses, 4096 counts apart" in said
+    assert "gear_ratio = 100 (ASSUMED (rippleb's default); no log can check it" in said
+
+
+def test_a_single_turn_encoder_that_wraps_is_named(tmp_path):
+    counts = (np.arange(40_000) // 2) % 4096
+    _frame(40_000).assign(encoder=counts).to_csv(tmp_path / "rec.csv", index=False)
+    with pytest.raises(InputError, match=r"counts_per_rev = 2500 .*encoder counts wrap at 4096"):
+        read_log(tmp_path / "rec.csv")
+    with pytest.raises(InputError, match=r"column encoder wraps at 4096 counts .*numpy.unwrap"):
+        read_log(tmp_path / "rec.csv", joint=_joint(tmp_path, "[joint]\ncounts_per_rev = 4096\n"))
+
+
+def test_the_gear_ratio_note_names_every_reader_of_the_gear_ratio():
+    """joint_checks.GEAR_RATIO_NOTE says which built-in reads ``gear_ratio`` and that no score
+    does: read from the source, so a method or a score that starts to read it fails here."""
+    from pathlib import Path
+
+    from rippleb.joint_checks import GEAR_RATIO_NOTE
+
+    root = Path(__file__).resolve().parents[1]
+    readers = sorted(p.stem for p in (root / "methods").glob("*.py") if "gear_ratio" in p.read_text())
+    assert readers == ["current_based"] and "only current-based reads it" in GEAR_RATIO_NOTE
+    scores = [p.name for p in (root / "rippleb" / "scoring").glob("*.py") if "gear_ratio" in p.read_text()]
+    assert scores == [] and "no score uses it" in GEAR_RATIO_NOTE

@@ -39,3 +39,15 @@ def test_each_file_printed_in_the_readme_is_the_shipped_one():
 
 def test_the_example_tests_use_the_conformance_kit():
     assert "check_method(Median" in shipped_files()["tests/test_median.py"]
+
+
+def test_the_readme_walk_installs_what_it_runs():
+    """Issue 39: 'pip install ./rippleb-median' then the plugin's pytest found no pytest: the
+    walk installs the plugin with its test extra, and that extra holds pytest."""
+    import tomllib
+
+    text = (ROOT / "README.md").read_text()
+    install = re.search(r"`pip install '\./rippleb-median\[(\w+)\]'`", text)
+    assert install is not None and "`python -m pytest rippleb-median/tests`" in text[install.end():]
+    extras = tomllib.loads(shipped_files()["pyproject.toml"])["project"]["optional-dependencies"]
+    assert any(req.startswith("pytest") for req in extras[install.group(1)])

@@ -1,5 +1,6 @@
 """Third-party plugins, pip-installed from packages built in a temporary directory."""
 
+import json
 import os
 import shutil
 import subprocess
@@ -48,6 +49,26 @@ class Chatty(Method):
 '''
 
 
+TUNABLE = '''
+from rippleb import Method
+from rippleb.dsp import fit_gain_offset
+
+class Gain(Method):
+    """The calibrated strain times scale: its default, 0.5, halves every torque."""
+    name = "gain"
+    tunable = {"scale": (0.5, 1.5, "linear")}
+
+    def __init__(self, scale=0.5):
+        self.scale = scale
+
+    def fit(self, calibration):
+        self.gain_, self.offset_ = fit_gain_offset(calibration.strain, calibration.torque_ref)
+
+    def step(self, block):
+        return self.scale * (block.strain * self.gain_ + self.offset_)
+'''
+
+
 def _package(root, name, module, source, entry_points):
     root.mkdir()
     eps = "\n".join(f'{k} = "{module}:{v}"' for k, v in entry_points.items())
@@ -77,10 +98,11 @@ def site(tmp_path_factory):
              {"raises": "Raises", "nans": "Nans", "short": "Short", "sleeps": "Sleeps", "chatty": "Chatty"})
     _package(tmp / "broken", "rippleb-broken", "rippleb_broken", "import no_such_module\n",
              {"broken-one": "Anything"})
+    _package(tmp / "gain", "rippleb-gain", "rippleb_gain", TUNABLE, {"gain": "Gain"})
     target = tmp / "site"
     # --no-deps keeps it offline apart from the build backend, which pip caches after the first run
     proc = subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--target", str(target),
-                           str(readme_pkg), str(tmp / "bad"), str(tmp / "broken")],
+                           str(readme_pkg), str(tmp / "bad"), str(tmp / "broken"), str(tmp / "gain")],
                           capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     return target
@@ -174,3 +196,30 @@ def test_variants_of_a_plugin_run_with_their_parameters_checked_in_a_child(site,
     assert rows.status.to_dict() == {"median[window=50]": "ok", "median[window=200]": "ok"}
     assert rows["params"].to_dict() == {"median[window=50]": '{"window": 50}',
                                         "median[window=200]": '{"window": 200}'}
+
+
+def test_a_plugin_tuned_by_rippleb_tune_runs_with_the_values_it_adopted(site, tmp_path):
+    """Issue 39: 'rippleb tune --methods mine' printed "replaces the default" though nothing was
+    replaced, and nothing said how to run the tuned values."""
+    record = tmp_path / "tuned.json"
+    tune = rippleb(site, "tune", "--methods", "gain", "--budget", 4, "--seeds", "100", "--jobs", 1, "--out", record,
+                   "--no-progress", timeout=1800)
+    assert tune.returncode == 0, tune.stderr
+    adopted = json.loads(record.read_text())["methods"]["gain"]["adopted"]
+    assert adopted["scale"] > 0.5 and "replaces the default" not in tune.stdout
+    variant = f"gain[scale={adopted['scale']!r}]"
+    assert (f"better on every tuning device, adopted; its constructor's default is unchanged: run it with "
+            f"--methods '{variant}' or --tuning {record}") in tune.stdout, tune.stdout
+    out = tmp_path / "run"
+    run = rippleb(site, "run", "--tuning", record, "--methods", "gain,raw", "--scenarios", "creep", "--seeds", 1,
+                  "--jobs", 1, "--out", out, "--no-progress", timeout=1800)
+    assert run.returncode == 0, run.stderr
+    assert f"rippleb: --tuning tuned.json: gain runs as '{variant}' (the point 'rippleb tune' adopted)" in run.stderr
+    rows = pd.read_csv(out / "results.csv").set_index("method")
+    assert sorted(rows.index) == sorted([variant, "raw"]) and (rows.status == "ok").all()
+    assert json.loads(rows.loc[variant, "params"]) == adopted
+    by_hand = rippleb(site, "run", "--methods", variant, "--scenarios", "creep", "--seeds", 1, "--jobs", 1,
+                      "--out", tmp_path / "by-hand", "--no-progress", timeout=1800)
+    assert by_hand.returncode == 0, by_hand.stderr
+    same = pd.read_csv(tmp_path / "by-hand" / "results.csv").set_index("method").loc[variant]
+    assert same["rms_error_nm"] == rows.loc[variant, "rms_error_nm"]   # the same variant, bit for bit

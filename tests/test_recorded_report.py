@@ -45,7 +45,7 @@ def test_a_log_without_reference_is_ranked_by_the_ripple_left_with_each_columns_
     assert "neither `torque_true` nor `torque_ref`" in text and "n/a" not in table[1]
     # shares of raw's ripple removed, from the rows: 1 - 0.2/1, 1 - 0.6/1
     assert "`order-tracking` 80%, `lowpass` 40%" in text
-    assert "What the truth-free columns cannot tell" in text
+    assert "What the scores cannot tell" in text
 
 
 def test_a_log_without_two_revolutions_is_ranked_by_the_delay_and_without_any_score_not_at_all():
@@ -138,3 +138,49 @@ def test_the_html_page_of_a_log_ranks_it_and_plots_the_ranking_column(tmp_path):
     cost = html_report._cost_figure(html_report.with_condition(frame), "ripple_wg_nm")
     assert sorted(float(y) for trace in cost.data for y in trace.y) == [0.2, 0.6, 1.0]
     assert "ripple left at WG orders" in cost.layout.yaxis.title.text
+
+
+def test_no_invalid_method_is_printed_as_a_rank():
+    """Issue 39: with 13 of 14 rows invalid, the one ok row was printed 'rank 1'; rows that were
+    not measured are listed, never ranked, and a log with none measured ranks nothing."""
+    frame = _log_frame(ripple_wg_nm=[1.0, 0.6, 0.2])
+    frame["status"] = "invalid"
+    frame["message"] = "its estimate reaches 7124 Nm, beyond 510 Nm"
+    summary = recorded.run_summary(frame)
+    assert "0 ranked rows of 3" in summary and "(no rows to rank)" in summary
+    assert not [line for line in summary.splitlines() if line.startswith("| 1 ")]
+    assert summary.count("invalid: its estimate reaches 7124 Nm") == 3
+
+
+def test_a_model_reference_is_ranked_by_the_rebuilt_torque_and_a_transducer_by_itself():
+    frame = _log_frame(rms_error_ref_nm=[2.0, 1.0, 0.5], rms_error_rebuilt_nm=[1.0, 2.0, 3.0])
+    assert recorded.ranking_column(frame) == "rms_error_rebuilt_nm"
+    text = recorded.recorded_tables_markdown(frame, {"reference_kind": "model"})
+    assert "`raw` ranks first by `rms_error_rebuilt_nm`" in text and "lacks the gear's own torque" in text
+    transducer = _log_frame(rms_error_ref_nm=[2.0, 1.0, 0.5])
+    text = recorded.recorded_tables_markdown(transducer, {"reference_kind": "transducer"})
+    assert "a torque transducer in series" in text and "`order-tracking` ranks first by `rms_error_ref_nm`" in text
+
+
+def test_the_ranking_says_how_far_to_trust_it_from_the_panels_nearest_joint():
+    from rippleb.report.agreement import trust_sentence
+
+    cells = [{"gear_ratio": ratio, "counts_per_rev": counts, "condition": condition, "reference_kind": "model",
+              "score": "rms_error_rebuilt_nm", "devices": 10, "mean_rho": rho, "min_rho": rho - 0.2}
+             for ratio, counts, rho in ((100, 2500, 0.5), (160, 4096, 0.9))
+             for condition, rho in (("same-session", rho), ("realistic", rho - 0.1))]
+    record = {"protocol": {"scenario": "paper-quintic", "seeds": "3000-3009"}, "cells": cells}
+    said = trust_sentence("rms_error_rebuilt_nm", {"gear_ratio": 150.0, "counts_per_rev": 5000,
+                                                   "reference_kind": "model"}, record)
+    assert "gear ratio 160, 4096 counts per revolution, model reference" in said
+    assert "+0.85 on average over 20 devices (per condition +0.80 to +0.90; the least on one device +0.60" in said
+    assert trust_sentence("rms_error_ref_nm", {"gear_ratio": 150.0, "counts_per_rev": 5000,
+                                               "reference_kind": "transducer"}, record) == ""   # not measured
+    assert trust_sentence("rms_error_rebuilt_nm", None, record) == ""
+
+
+def test_a_log_without_reference_shows_the_cost_it_measured():
+    """Issue 39: the no-reference report showed n/a for p50 though results.csv has it."""
+    frame = _log_frame(ripple_wg_nm=[1.0, 0.6, 0.2]).assign(status="no-reference")
+    table = [line for line in recorded.log_markdown(frame).splitlines() if line.startswith("| ")][1:]
+    assert all(line.rstrip(" |").endswith("2") for line in table), table

@@ -18,6 +18,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 from rippleb.printable import escaped, markdown_code, markdown_text
 from rippleb.report import html_report
 from rippleb.report.markdown import markdown, one_line
+from rippleb.report.markdown_html import inline_html, table_html
 
 cmark = pytest.importorskip("cmarkgfm.cmark")
 
@@ -101,8 +102,8 @@ def test_the_html_page_renders_the_report_s_markdown_as_github_does(value):
     """index.html renders the README's sentences and cells itself: the same text as cmark-gfm."""
     for written in (markdown_text(value), markdown_code(value)):
         sentence = f"w {written} z"
-        assert Page(html_report._md(sentence)).text == Page(render(sentence)).text.strip("\n")
-        ours = Page(html_report._markdown_table(markdown([[written]], ["head"])))
+        assert Page(inline_html(sentence)).text == Page(render(sentence)).text.strip("\n")
+        ours = Page(table_html(markdown([[written]], ["head"])))
         assert set(ours.tags()) <= {"table", "thead", "tbody", "tr", "th", "td", "code"}
         github = Page(render(markdown([[written]], ["head"])))
         assert ours.text.split("head", 1)[1].strip() == github.text.split("head", 1)[1].strip()

@@ -13,7 +13,7 @@ from rippleb.engine.tuner import entry, plan
 from rippleb.errors import PluginError
 from rippleb.registry import Registry
 from rippleb.report.tuning_table import tuning_markdown
-from rippleb.tuning import (BUDGET, RULE_ID, SEEDS, adopted, candidates, check_tunable, pvalues,
+from rippleb.tuning import (BUDGET, PAIRED_SEEDS, PROTOCOL_RULE, RULE_ID, SEEDS, adopted, candidates, check_tunable, pvalues,
                             read_record, replaces_default, rule_of, summary)
 
 RANGES = {"a": (1e-3, 10.0, "log"), "b": (-1.0, 1.0, "linear"), "n": (2, 9, "int")}
@@ -108,10 +108,10 @@ def test_the_rule_reads_per_device_differences_only(difficulty, gain):
 def test_a_method_entry_keeps_the_default_unless_the_rule_says_otherwise():
     tried = [({"q": 30}, DEFAULT, ""), ({"q": 10}, _point(-0.5, 0.0)[:3] + _point(+0.01)[3:], ""),
              ({"q": 20}, _point(+0.001), "")]
-    kept = entry({"q": (5, 50, "int")}, tried, "", 1.0)
+    kept = entry({"q": (5, 50, "int")}, tried, "", 1.0, RULE_ID)
     assert kept["best"] == {"q": 10} and not kept["replaced"] and kept["adopted"] == {"q": 30}
     tried[2] = ({"q": 20}, _point(-0.02, 0.004), "")
-    won = entry({"q": (5, 50, "int")}, tried, "", 1.0)
+    won = entry({"q": (5, 50, "int")}, tried, "", 1.0, RULE_ID)
     assert won["replaced"] and won["adopted"] == {"q": 20} and won["best"] == {"q": 10} and won["evaluations"] == 3
     assert won["points"][0]["p_holm"] is None and won["points"][2]["p_holm"] < 0.05
 
@@ -127,7 +127,9 @@ RECORD = read_record()
 
 
 def test_the_tuning_devices_are_neither_development_nor_published_devices():
-    assert len(SEEDS) >= 10 and not set(SEEDS) & set(range(100))   # development: the public seeds 0-99
+    for seeds in (SEEDS, PAIRED_SEEDS):   # development: the public seeds 0-99
+        assert not set(seeds) & set(range(100))
+    assert len(PAIRED_SEEDS) >= 10 and set(SEEDS) <= set(PAIRED_SEEDS)
 
 
 def test_the_record_follows_its_own_rule_on_every_method():
@@ -148,7 +150,7 @@ def test_the_record_is_made_by_the_current_protocol():
     are tuned again: ``rippleb tune --out methods/tuning.json`` (docs/tuning.md), then the
     defaults this file's next test names."""
     protocol = RECORD["protocol"]
-    assert (protocol["budget"], protocol["seeds"], rule_of(RECORD)) == (BUDGET, list(SEEDS), RULE_ID), \
+    assert (protocol["budget"], protocol["seeds"], rule_of(RECORD)) == (BUDGET, list(SEEDS), PROTOCOL_RULE), \
         ("methods/tuning.json was made by another protocol (seeds "
          f"{protocol['seeds'][0]}-{protocol['seeds'][-1]}, rule {rule_of(RECORD)}): re-tune with "
          "'rippleb tune --out methods/tuning.json' and set the defaults it adopts (docs/tuning.md)")
@@ -186,7 +188,8 @@ def _tune(*args):
 
 def test_tune_through_the_cli_writes_a_record_and_says_its_verdict(tmp_path):
     out = tmp_path / "tuning.json"
-    proc = _tune("--methods", "lowpass,raw", "--budget", 3, "--seeds", "100", "--jobs", 1, "--out", out)
+    proc = _tune("--methods", "lowpass,raw", "--budget", 3, "--seeds", "100", "--jobs", 1, "--out", out,
+                 "--rule", RULE_ID)
     assert proc.returncode == 0, proc.stderr
     record = json.loads(out.read_text())
     assert record["protocol"]["budget"] == 3 and record["protocol"]["seeds"] == [100]
@@ -205,21 +208,6 @@ def test_tune_through_the_cli_writes_a_record_and_says_its_verdict(tmp_path):
     assert "methods with something to tune adopt the same point on both sets" in table.stdout
     same = _tune("--compare", out, out)
     assert same.returncode == 2 and "share devices [100]" in same.stderr
-
-
-def test_the_stability_table_in_the_docs_is_generated_from_its_records():
-    """docs/tuning.md's stability table is what 'rippleb tune --compare' prints for the two
-    records committed beside it (docs/tuning-stability/)."""
-    from pathlib import Path
-
-    from rippleb.report.tuning_stability import read, stability_markdown
-
-    here = Path(__file__).resolve().parent.parent / "docs"
-    records = sorted((here / "tuning-stability").glob("*.json"))
-    assert len(records) == 2, (f"docs/tuning-stability/ holds {len(records)} records, not 2: make them with the "
-                               f"commands of docs/tuning.md, 'Re-tuning after a change of the physics'")
-    assert stability_markdown(*(read(p) for p in records)) in (here / "tuning.md").read_text(), \
-        "docs/tuning.md's stability table is not what 'rippleb tune --compare' prints for docs/tuning-stability/"
 
 
 @pytest.mark.parametrize("args, message", [

@@ -18,6 +18,8 @@ import pytest
 
 from rippleb.cli import main
 
+ROOT = Path(__file__).resolve().parents[1]
+
 FS = 20_000.0
 METHODS = "raw,lowpass"
 
@@ -42,7 +44,7 @@ def test_a_run_says_what_it_assumed_before_it_starts(tmp_path, monkeypatch, caps
     _frame().to_csv(tmp_path / "rec.csv", index=False)
     code, err, rows = _run(tmp_path, monkeypatch, capsys, "--log", "rec.csv")
     assert code == 0, err
-    assert "counts_per_rev = 2500 (ASSUMED (rippleb's default))" in err
+    assert "counts_per_rev = 2500 (ASSUMED (rippleb's default);" in err
     assert "column strain = 'strain' in V (ASSUMED" in err
     assert err.index("counts_per_rev") < err.index("no --calibration")   # before the run, not after
 
@@ -66,18 +68,20 @@ def test_daq_names_and_units_are_read_through_the_joint_file(tmp_path, monkeypat
                                plain.sort_values("method").rms_error_ref_nm, rtol=1e-6, atol=1e-9)
 
 
-def test_mv_against_v_is_invalid_with_a_message_not_a_number(tmp_path, monkeypatch, capsys):
+def test_mv_against_v_is_one_line_naming_the_strain_not_a_ranking(tmp_path, monkeypatch, capsys):
+    """Issue 39: strain in V labelled mV ran every method, 13 of 14 rows invalid, exit 0 and
+    current-based printed 'rank 1'; now the log is refused before any row runs."""
     frame = _frame()
     frame.assign(strain=frame.strain * 1e3).to_csv(tmp_path / "rec.csv", index=False)   # mV, unsaid
     _frame(int(1.2 * FS), seed=1).to_csv(tmp_path / "cal.csv", index=False)                # V
     code, err, rows = _run(tmp_path, monkeypatch, capsys, "--log", "rec.csv", "--calibration", "cal.csv")
-    assert code == 0, err
-    assert (rows.status == "invalid").all(), rows[["method", "status", "message"]]
-    assert rows.message.str.contains("beyond 510 Nm").all() and rows.rms_error_ref_nm.isna().all()
+    assert code == 2 and err.count("\n") == 1 and rows is None, err
+    assert err.startswith("rippleb: error: rec.csv: column strain ('strain' in V): calibrated as the calibration "
+                          "log's strain, it reads up to "), err
+    assert "the two logs' strain units differ (strain in V labelled mV reads 1000 times too large)" in err
     (tmp_path / "rec.toml").write_text('[joint.columns]\nstrain = {column = "strain", unit = "mV"}\n')
-    os.rename(tmp_path / "out", tmp_path / "first")
     code, err, rows = _run(tmp_path, monkeypatch, capsys, "--log", "rec.csv", "--calibration", "cal.csv")
-    assert (rows.status == "ok").all() and (rows.rms_error_ref_nm < 1.0).all(), rows   # its sidecar says mV
+    assert code == 0 and (rows.status == "ok").all() and (rows.rms_error_ref_nm < 1.0).all(), rows   # its sidecar says mV
 
 
 def test_a_log_without_reference_says_what_can_and_cannot_be_scored(tmp_path, monkeypatch, capsys):
@@ -143,32 +147,34 @@ def _cli(*args, cwd: Path) -> subprocess.CompletedProcess:
 
 
 @pytest.mark.slow
-def test_the_worked_example_of_docs_your_joint(tmp_path):
-    """docs/your-joint.md, command by command: lab logs and joint.toml to a ranking; the
-    16384-count log scored as the Python route with JointSpec(counts_per_rev=16384) scores it."""
+def test_the_walk_of_docs_your_joint(tmp_path):
+    """docs/your-joint.md's numbers are what its walk prints today: the script runs every command
+    of the page (lab logs of both kinds of reference to rankings, the refusals) and compares."""
+    done = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "your_joint_walk.py"), "--out",
+                           str(tmp_path / "walk"), "--check"], capture_output=True, text=True, timeout=3600)
+    assert done.returncode == 0, done.stdout[-4000:] + done.stderr[-2000:]
+
+
+@pytest.mark.slow
+def test_a_lab_log_reads_as_the_same_log_in_rippleb_columns_through_python(tmp_path):
+    """The lab log through its joint file, and the same log in rippleb's columns read from Python
+    with JointSpec(counts_per_rev=4096), give the same numbers."""
+    joint = ("--param", "joint.counts_per_rev=4096", "--param", "joint.gear_ratio=160")
     for scenario, out in (("calibration", "cal.csv"), ("paper-quintic", "rec.csv")):
-        done = _cli("simulate", scenario, "--format", "lab", "--out", out, cwd=tmp_path)
+        done = _cli("simulate", scenario, "--format", "lab", *joint, "--out", out, cwd=tmp_path)
         assert done.returncode == 0, done.stderr
     rec = pd.read_csv(tmp_path / "rec.csv")
-    assert list(rec.columns) == ["t", "strain_mV", "enc_counts", "i_motor_A", "idx", "load_cell_Nm"]
-    done = _cli("run", "--log", "rec.csv", "--calibration", "cal.csv", "--joint", "joint.toml",
-                "--methods", "raw,order-tracking", "--jobs", "1", "--no-progress", "--out", "ranked", cwd=tmp_path)
-    assert done.returncode == 0, done.stderr
-    assert "(ASSUMED" not in done.stderr and "counts_per_rev = 16384 (given in joint.toml)" in done.stderr
-    rows = pd.read_csv(tmp_path / "ranked" / "results.csv").set_index("method")
-    assert (rows.status == "ok").all()
-    assert rows.rms_error_ref_nm["order-tracking"] < rows.rms_error_ref_nm["raw"]
-
-    # the same log in rippleb's columns, scored on itself: the CLI with the joint file and
-    # the Python route with JointSpec(counts_per_rev=16384) give the same numbers
+    assert list(rec.columns) == ["t", "strain_mV", "enc_counts", "i_motor_A", "idx", "torque_sensor_Nm"]
     pd.DataFrame({"t": rec.t / 1e3, "strain": rec.strain_mV / 1e3, "encoder": rec.enc_counts,
-                  "current": rec.i_motor_A, "torque_ref": rec.load_cell_Nm}).to_csv(tmp_path / "plain.csv", index=False)
-    (tmp_path / "j16k.toml").write_text("[joint]\ncounts_per_rev = 16384\n")
-    done = _cli("run", "--log", "plain.csv", "--joint", "j16k.toml", "--methods", "raw,order-tracking",
+                  "current": rec.i_motor_A, "torque_ref": rec.torque_sensor_Nm}).to_csv(tmp_path / "plain.csv",
+                                                                                     index=False)
+    (tmp_path / "j4096.toml").write_text('[joint]\ncounts_per_rev = 4096\ngear_ratio = 160.0\n'
+                                         '[joint.reference]\nkind = "transducer"\n')
+    done = _cli("run", "--log", "plain.csv", "--joint", "j4096.toml", "--methods", "raw,order-tracking",
                 "--jobs", "1", "--no-progress", "--out", "cli", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     script = ("import rippleb, sys; f = rippleb.run_log(rippleb.read_log('plain.csv', "
-              "spec=rippleb.JointSpec(counts_per_rev=16384)), methods='raw,order-tracking'); "
+              "spec=rippleb.JointSpec(counts_per_rev=4096, gear_ratio=160.0)), methods='raw,order-tracking'); "
               "f.to_csv('python.csv', index=False)")
     done = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=1200)
     assert done.returncode == 0, done.stderr

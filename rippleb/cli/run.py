@@ -61,6 +61,10 @@ def add_run(sub) -> None:
     p.add_argument("--resample", action="store_true",
                    help="with --log: put logs whose time stamps jitter on a uniform grid at their mean "
                         "rate (linear interpolation; encoder counts held) instead of refusing them")
+    p.add_argument("--tuning", type=Path, metavar="FILE",
+                   help="a record written by 'rippleb tune --out FILE': each method of the run whose best "
+                        "point the rule adopted runs as that variant ('NAME[p=v]'); a variant given in "
+                        "--methods keeps its own values")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_executor_options(p)
     add_seal_options(p)
@@ -163,6 +167,10 @@ def _run(args, start: float) -> int:
         if value is not None and not value.replace(",", "").strip():
             raise InputError(f"{flag} is empty; leave it out for the default")
     progress = False if args.no_progress else None
+    if args.tuning is not None:
+        if args.resume is not None:
+            raise InputError("--tuning does not apply with --resume: the run's methods are in its run.json")
+        args.methods = tuned_methods(args.methods, args.tuning)
 
     def started():
         args.started = True
@@ -205,15 +213,63 @@ def _run(args, start: float) -> int:
                            out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress,
                            on_start=started, executor=executor(args), sealed=args.sealed,
                            salt_file=args.salt_file)
+    from rippleb.report.provenance import read_run_provenance
     from rippleb.report.recorded import run_summary
 
-    print(run_summary(frame))
+    joint = read_run_provenance(args.out_dir).get("joint") if args.log is not None and len(frame) else None
+    print(run_summary(frame, joint))
     counts = frame["status"].value_counts().to_dict() if len(frame) else {}
     print(f"\n{len(frame)} rows ({', '.join(f'{v} {k}' for k, v in counts.items()) or 'none'}) "
           f"in {args.out_dir / 'results.csv'}; total wall time {time.perf_counter() - start:.1f} s")
     print(f"Next: rippleb report {args.out_dir} (tables with intervals, figures; --html for the "
           f"interactive page)")
-    return report_broken_plugins(frame)
+    return max(report_broken_plugins(frame), report_nothing_measured(frame))
+
+
+def report_nothing_measured(frame) -> int:
+    """One stderr line and exit 1 when rows ran but none was measured (every one ``error``,
+    ``invalid`` or ``timeout``): the run holds no result to compare; else 0."""
+    from rippleb.scoring.scorable import MEASURED
+
+    if not len(frame) or frame["status"].isin(MEASURED).any():
+        return 0
+    counts = ", ".join(f"{v} {k}" for k, v in frame["status"].value_counts().items())
+    print(f"rippleb: error: no row was measured ({counts}): nothing to rank; each row's message says why",
+          file=sys.stderr)
+    return 1
+
+
+def tuned_methods(methods: str | None, path: Path) -> str:
+    """``--methods`` with each plain method name that the tuning record ``path`` adopted a point
+    for replaced by that variant (``NAME[p=v]``); said on stderr, one line per method."""
+    import json
+
+    from rippleb.registry import Registry
+    from rippleb.tuning import adopted_points
+    from rippleb.variants import label, split_top_level
+
+    try:
+        record = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"--tuning {path}: no such file") from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise InputError(f"--tuning {path}: cannot read a tuning record: {exc}") from None
+    adopted = adopted_points(record, f"--tuning {path}")
+    registry = Registry.discover()
+    items = (split_top_level(methods) if methods else registry.names("builtin"))
+    items = registry.names() if [i.strip() for i in items] == ["all"] else [i.strip() for i in items if i.strip()]
+    out = []
+    for item in items:
+        if item in adopted:
+            out.append(label(item, adopted[item]))
+            print(f"rippleb: --tuning {path.name}: {item} runs as {out[-1]!r} (the point 'rippleb tune' adopted)",
+                  file=sys.stderr)
+        else:
+            out.append(item)
+    if not any(i in adopted for i in items):
+        print(f"rippleb: --tuning {path.name}: no method of this run has an adopted point in it "
+              f"({', '.join(adopted) or 'none adopted'}); every method runs at its defaults", file=sys.stderr)
+    return ",".join(out)
 
 
 def _warn_other_environment(run_dir: Path) -> None:

@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 from rippleb.errors import InputError
-from rippleb.tuning import BUDGET, CRITERION, RULE, RULE_ID, SEED, SEEDS
+from rippleb.tuning import BUDGET, CRITERION, PAIRED_SEEDS, PROTOCOL_RULE, RULE_ID, RULES, SEED, SEEDS
 
 #: The largest ``--budget``: 1024 points a method (64 times the protocol's 16), each fitted
 #: and run on every tuning device, is hours of CPU a method; ``--budget 1000000`` was
@@ -30,8 +30,9 @@ def add_tune(sub) -> None:
         description="Tune methods' declared parameters (their 'tunable' ranges) by one protocol: the "
                     f"default and budget-1 Sobol points (seed {SEED}), each fitted and run on the "
                     "calibration log of each tuning device and scored against torque_ref (never a "
-                    f"scored scenario, never torque_true). Rule: {RULE}. Prints one line per method "
-                    "and writes the record as JSON (docs/tuning.md).")
+                    f"scored scenario, never torque_true). Rule (--rule): {RULES[PROTOCOL_RULE]}. Prints one line per method "
+                    "and writes the record as JSON (docs/tuning.md); 'rippleb run --tuning FILE' runs "
+                    "each method at the point the rule adopted.")
     p.add_argument("--methods", help="comma-separated method names (default: every built-in)")
     p.add_argument("--budget", type=int, default=BUDGET,
                    help=f"calibration evaluations per method (default {BUDGET}, the built-ins' budget)")
@@ -40,7 +41,12 @@ def add_tune(sub) -> None:
                         "published row uses)")
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                    help=f"points evaluated in parallel processes (default: the number of CPUs, {os.cpu_count()} here)")
-    p.add_argument("--out", type=Path, help="JSON file for the record (written after each method)")
+    p.add_argument("--out", type=Path, help="JSON file for the record (written after each method); "
+                                            "'rippleb run --tuning FILE' runs the adopted points")
+    p.add_argument("--rule", choices=sorted(RULES), default=PROTOCOL_RULE,
+                   help=f"the adoption rule (default {PROTOCOL_RULE}, the built-ins' record's): {RULE_ID}: "
+                        f"{RULES[RULE_ID]} (needs 20 devices, e.g. --seeds {PAIRED_SEEDS[0]}-{PAIRED_SEEDS[-1]}); "
+                        f"every-device: {RULES['every-device']}")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--compare", nargs=2, type=Path, metavar=("A.json", "B.json"),
                    help="tune nothing: print the stability table of two records made on disjoint sets of "
@@ -72,8 +78,8 @@ def cmd_tune(args) -> int:
         raise InputError(f"--out {args.out}: is a directory; give a file name (e.g. {args.out / 'tuning.json'})")
     planned = plan(names, registry, args.budget)
     total = sum(len(points) for _, points, _ in planned.values())
-    record = {"protocol": {"budget": args.budget, "seeds": seeds, "criterion": CRITERION, "rule": RULE,
-                           "rule_id": RULE_ID,
+    record = {"protocol": {"budget": args.budget, "seeds": seeds, "criterion": CRITERION, "rule": RULES[args.rule],
+                           "rule_id": args.rule,
                            "sampler": f"the default, then budget-1 points of a scrambled Sobol sequence "
                                       f"(scipy.stats.qmc, seed {SEED}), 3 significant digits"},
               "rippleb_version": __version__, "methods": {}}
@@ -84,9 +90,9 @@ def cmd_tune(args) -> int:
             record["methods"][name] = entry
             if args.out is not None:
                 _write(args.out, record)
-            bar.write(line(name, entry))
+            bar.write(line(name, entry, args.out))
 
-        tune(planned, seeds, args.jobs, on_method=finished, on_point=bar.update)
+        tune(planned, seeds, args.jobs, on_method=finished, on_point=bar.update, rule=args.rule)
     if args.out is not None:
         print(f"record written to {args.out}", file=sys.stderr)
     return 0
@@ -103,18 +109,23 @@ def compare(args) -> int:
     return 0
 
 
-def line(name: str, entry: dict) -> str:
-    """One method's result as one line."""
+def line(name: str, entry: dict, out: Path | None = None) -> str:
+    """One method's result as one line, ending with how to run what the rule adopted: the
+    variant's exact ``--methods`` item, or ``--tuning`` with the record ``out``."""
+    from rippleb.variants import label
+
     if entry["evaluations"] == 1:
         return f"{name}: {entry['default_score']:.3f} Nm at its defaults; {entry['note']}"
-    adopted = ", ".join(f"{k}={v:g}" for k, v in entry["adopted"].items())
     if not entry["replaced"]:
-        verdict = "default kept" + (" (no point beats it by the paired test)" if entry["best"] != entry["default"]
+        verdict = "default kept" + (" (no point beats it by the rule)" if entry["best"] != entry["default"]
                                     else " (the best point is the default)")
-    elif entry["adopted"] == entry["best"]:
-        verdict = "the best point replaces the default"
     else:
-        verdict = f"{adopted} replaces the default (the best point does not pass the paired test)"
+        how = f" or --tuning {out}" if out is not None else " (or write the record with --out FILE and pass --tuning FILE)"
+        which = ("the best point replaces the default" if entry["adopted"] == entry["best"] else
+                 f"{', '.join(f'{k}={v:g}' for k, v in entry['adopted'].items())} replaces the default "
+                 f"(the best point does not pass the rule)")
+        verdict = (f"{which}; its constructor's default is unchanged: run it with "
+                   f"--methods '{label(name, entry['adopted'])}'{how}")
     best = ", ".join(f"{k}={v:g}" for k, v in entry["best"].items())
     text = (f"{name}: default {entry['default_score']:.3f} Nm, best {entry['best_score']:.3f} Nm at "
             f"{best} ({entry['evaluations']} evaluations): {verdict}")

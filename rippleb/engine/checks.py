@@ -101,6 +101,16 @@ def check_calibration(cal: SensorLog, name: str, scored: SensorLog) -> None:
                          f"record both at one rate")
 
 
+def check_strain_scale(log: SensorLog, cal: SensorLog, name: str) -> None:
+    """Refuse a scored log whose strain, calibrated as the calibration log's, is no torque of
+    the joint (:func:`rippleb.joint_checks.check_strain_scale`): its unit differs."""
+    from rippleb.data import MAX_TORQUE_FACTOR
+    from rippleb.joint_checks import check_strain_scale as check
+
+    check(log.strain, cal, MAX_TORQUE_FACTOR * log.spec.rated_torque, name,
+          log.meta.get("columns", {}).get("strain", "as given"))
+
+
 def rate_from_t(log: SensorLog) -> float:
     """The sample rate [Hz] given by the log's time stamps, their mean rate
     (:func:`rippleb.timebase.uniform_rate`: robust to Unix time's quantized steps); its

@@ -32,14 +32,15 @@ from rippleb.files import atomic_path, open_appending
 from rippleb.scoring.metrics import LATER_COLUMNS, METRIC_COLUMNS
 from rippleb.printable import csv_read, csv_text, escaped
 from rippleb.scoring.scorable import MEASURED, NO_REFERENCE  # noqa: F401 - MEASURED re-exported
+from rippleb.scoring.rebuilt import REFERENCE_COLUMNS
 from rippleb.scoring.truthfree import TRUTH_FREE_COLUMNS
 
 KEY_COLUMNS = ("method", "scenario", "condition", "seed")
-# The truth-free columns came later: a results file without them still reads (as n/a).
-COLUMNS = (KEY_COLUMNS + ("status",) + METRIC_COLUMNS + TRUTH_FREE_COLUMNS
+# The truth-free and reference columns came later: a results file without them still reads (as n/a).
+COLUMNS = (KEY_COLUMNS + ("status",) + METRIC_COLUMNS + TRUTH_FREE_COLUMNS + REFERENCE_COLUMNS
            + ("message", "n_samples", "fit_s", "wall_s", "calibration", "params", "scenario_sha256",
               "rippleb_version", "python", "numpy", "platform", "cpu", "numerics", "run_id"))
-NUMERIC_COLUMNS = METRIC_COLUMNS + TRUTH_FREE_COLUMNS + ("n_samples", "fit_s", "wall_s")
+NUMERIC_COLUMNS = METRIC_COLUMNS + TRUTH_FREE_COLUMNS + REFERENCE_COLUMNS + ("n_samples", "fit_s", "wall_s")
 STATUSES = ("ok", "error", "invalid", "timeout", NO_REFERENCE)
 #: An ``ok`` row holds at least one of these: an error against a reference, or, on a log
 #: with none, a truth-free score.

@@ -39,7 +39,7 @@ from rippleb.engine.process import sandbox
 from rippleb.engine import sealing
 from rippleb.engine.cache import digest, log_bytes
 from rippleb.engine.checks import (check_calibration, check_options, check_recording, check_reference, check_scenario,
-                                   check_scored_length)
+                                   check_scored_length, check_strain_scale)
 from rippleb.simulator.conditions import DEFAULT_CONDITION, calibration_condition
 from rippleb.data import SensorLog
 from rippleb.errors import InputError
@@ -234,16 +234,21 @@ def run_log(log, calibration=None, methods=None, *, jobs: int = 1, out=None,
             check_calibration(cal, label, log)
         check_scored_length(log, log_name)
         check_reference(cal, log_name if calibration is None else label)
+        check_strain_scale(log, cal, log_name)
+        truth = Truth.from_recording(log)
         scenario = f"log:{log_name}"
         case = Case(scenario, digest(log_bytes(log)), DEFAULT_CONDITION, 0, SCORED)
         cal_case = Case(CALIBRATION, digest(log_bytes(cal)), DEFAULT_CONDITION, 0, FITTING)
         plan = Plan(calibration_label=label)
-        plan.ready = {case: (log, Truth.from_recording(log)), cal_case: (cal, None)}
+        plan.ready = {case: (log, truth), cal_case: (cal, None)}
         for method in names:
             plan.add_row(RowKey(method, scenario, DEFAULT_CONDITION, 0), case, cal_case)
         return _execute(registry, plan, out=out, jobs=jobs, timeout=timeout, memory_mb=memory_mb,
                         resume=False, progress=progress, on_start=on_start, server=server,
-                        config={"methods": names, "log": log_name, "conditions": [DEFAULT_CONDITION]})
+                        config={"methods": names, "log": log_name, "conditions": [DEFAULT_CONDITION],
+                                "joint": {"gear_ratio": log.spec.gear_ratio,
+                                          "counts_per_rev": log.spec.counts_per_rev,
+                                          "reference_kind": truth.reference_kind}})
 
 
 def _log_label(log, default: str) -> str:

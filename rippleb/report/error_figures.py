@@ -89,10 +89,10 @@ def plot_error_vs_speed(tables, out_png, seeds_text: str = "seed 0", scenarios=N
     lows, highs = [], []
     for i, name in enumerate(names):
         mean, half = tables[name]
-        kw = style(name, i)
+        kw = style(name, i, points=True)
         shift = (i - (len(names) - 1) / 2) * 0.6 * width / max(len(names), 1)  # bars side by side
         bars = np.where(np.isfinite(half), half, 0.0)
-        ax.errorbar(tables["speed"] + shift, mean, yerr=bars, marker="o", ms=3.5, lw=1.2, capsize=2, **kw)
+        ax.errorbar(tables["speed"] + shift, mean, yerr=bars, ms=3.5, lw=1.2, capsize=2, **kw)
         lows.append(np.nanmin(mean))
         highs.append(np.nanmax(mean + bars))
     if lows:
@@ -256,9 +256,9 @@ def plot_accuracy_vs_cost(frame, out_png, column: str = "rms_error_nm") -> Path:
         if cost.empty or not np.isfinite(y) or y <= 0:  # a log axis has no place for 0
             continue
         x, lo, hi = np.percentile(cost, [50, 25, 75])
-        kw = style(name, k)
+        kw = style(name, k, points=True)
         ax.errorbar([x], [y], xerr=[[x - lo], [hi - x]], yerr=[[half if np.isfinite(half) else 0]] * 2,
-                    fmt="o", ms=7, color=kw["color"], capsize=3, label=kw["label"])
+                    fmt=kw["marker"], ms=7, color=kw["color"], capsize=3, label=kw["label"])
     ax.set_xscale("log")
     ax.set_yscale("log")
     n_seeds, n_scen = ok["seed"].nunique(), ok["scenario"].nunique()

@@ -20,7 +20,7 @@ from rippleb.report.error_figures import (COST_FIGURE_LABELS, error_by_speed,  #
                                           error_by_speed_over_seeds, longest_rest_restart, plot_accuracy_vs_cost,
                                           plot_error_vs_speed, plot_residual_spectra, plot_restart_zoom,
                                           residual_spectra, speed_edges)
-from rippleb.report.plotting import (METHOD_STYLE, MOTION_EDGE_LABEL, SIGNAL_SCENARIOS, ScenarioSignals,  # noqa: F401
+from rippleb.report.plotting import (MOTION_EDGE_LABEL, SIGNAL_SCENARIOS, ScenarioSignals,  # noqa: F401
                                      _amplitude, _motion_edges, _pyplot, _save, plot_text, restream, style)
 
 #: Wave-generator speeds of the Fig. 2 replica [rev/s]: slow to brisk motor speeds.

@@ -1,32 +1,31 @@
 """``rippleb report DIR --html``: one self-contained, interactive ``index.html``.
 
-The page holds the method x condition summary and headline, per condition a sortable
-table of every metric (mean ± 95 % t-interval over seeds), interactive figures drawn with
-plotly (every row as a point whose hover names its method, scenario, condition and seed;
-accuracy against cost; the signals of one device, zoomable onto a restart) and the
-provenance. plotly.js is embedded once, in the first figure, so the page opens without
-network. A small script at the top of the page lists any JavaScript error in the page
+The page holds what the README explains, in the README's own words (:mod:`rippleb.report.sections`
+through :mod:`rippleb.report.markdown_html`: how to read the tables, the method x condition
+summary and headline, what each method did with the gear's real torque, each method in
+plain words, how timing was taken, how each method was tuned; for a recorded log its
+ranking and how far to trust it), every table best first by the score it ranks by, a note
+when only one condition ran; per condition a sortable table of every metric (mean ± 95 %
+t-interval over seeds); interactive figures drawn with plotly (every row as a point whose
+hover names its method, scenario, condition and seed; accuracy against cost; the signals
+of one device, zoomable onto a restart), each method in its colour, marker and dash
+(:mod:`rippleb.report.palette`); and the provenance. plotly.js is embedded once, in the
+first figure, so the page opens without network. A small script at the top of the page lists any JavaScript error in the page
 itself (``#page-errors``), so a reader, and the browser test, see a broken figure.
 """
 
 from __future__ import annotations
 
 import html
-import re
 from pathlib import Path
 
 import numpy as np
 
 from rippleb.files import atomic_path
+from rippleb.report.markdown_html import inline_html, markdown_html, table_html
+from rippleb.report.palette import look
 from rippleb.report.stats import (condition_order, fmt_interval, interval_frame, method_order, scenario_order,
                                   with_condition)
-
-#: Colour per built-in method, the same as the matplotlib figures (tableau palette).
-COLORS = {"raw": "#1f77b4", "lowpass": "#17becf", "current-based": "#bf00bf", "order-tracking": "#d62728",
-          "order-tracking-no-deadzone": "#ff7f0e", "order-tracking-no-backprop": "#8c564b",
-          "switched-notch": "#2ca02c", "kalman-ripple": "#9467bd", "angle-adaptive": "#bcbd22",
-          "angle-adaptive-frozen": "#7f7f7f", "spatial-filter": "#aec7e8", "fourier-lms": "#e377c2",
-          "periodic-dob": "#393b79", "gear-aware": "#525252", "gear-keeping": "#98df8a"}
 
 STYLE = """body{font-family:system-ui,sans-serif;margin:1.5em auto;max-width:1200px;color:#222}
 table{border-collapse:collapse;margin:.5em 0 1.5em;font-size:13px}
@@ -57,6 +56,10 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
                sweeps=()) -> Path:
     """Write the interactive report of ``frame`` to ``path`` and return it.
 
+    Its explanatory sections are the README's own (:mod:`rippleb.report.sections`,
+    :mod:`rippleb.report.recorded`), shown through :func:`~rippleb.report.markdown_html.markdown_html`;
+    every table starts in order of the score it ranks by.
+
     Parameters
     ----------
     frame
@@ -73,11 +76,9 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
         ``[(name, rows)]`` of the sweeps the conclusions are re-evaluated on
         (:mod:`rippleb.report.holds`).
     """
-    from rippleb.report.claims import split_sentence
-    from rippleb.report.tables import (condition_headline, condition_summary_markdown, counts_sentence,
-                                       headline_lines, is_recorded, title_lines)
-
     from rippleb.report.recorded import ranking_column
+    from rippleb.report.sections import READING_RECORDED, READING_SIMULATED, conditions_note
+    from rippleb.report.tables import counts_sentence, is_recorded, timing_note, title_lines
 
     frame = with_condition(frame)
     recorded = is_recorded(frame)
@@ -89,22 +90,13 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
     divs = [fig.to_html(full_html=False, include_plotlyjs=(i == 0), div_id=f"figure-{i}",
                         config={"responsive": True, "displaylogo": False})
             for i, fig in enumerate(figures)]
-    title = title_lines(prov.get("published", False), is_recorded(frame), str(prov.get("run_dir", "DIR")))
-    body = [f"<h1>{_md(title[0].lstrip('# '))}</h1>", f"<p>{_md(title[2])}</p>",
-            f"<p>{_md(counts_sentence(frame, is_recorded(frame)))}</p>",
-            '<ul id="page-errors"></ul>']
-    if recorded:
-        body += _recorded_body(frame)
-    else:
-        body += ["<h2>Headlines</h2>", f"<p>{_md(split_sentence(frame['seed'].unique()))}</p>",
-                 _list(headline_lines(frame)),
-                 "<h2>Method x condition: mean RMS error over the scenarios [Nm]</h2>",
-                 _markdown_table(condition_summary_markdown(frame)), "<h3>Who leads under each condition</h3>",
-                 _list(condition_headline(frame))]
-    if frame["condition"].nunique() > 1:
-        from rippleb.report.verdicts import method_verdicts
-
-        body += ["<h3>Each method in plain words</h3>", _list(method_verdicts(frame))]
+    title = title_lines(prov.get("published", False), recorded, str(prov.get("run_dir", "DIR")))
+    note = conditions_note(frame)
+    body = [f"<h1>{inline_html(title[0].lstrip('# '))}</h1>", f"<p>{inline_html(title[2])}</p>",
+            f"<p>{inline_html(counts_sentence(frame, recorded))}</p>"]
+    body += [f'<p class="note" id="conditions-note">{inline_html(note)}</p>'] if note else []
+    body += ['<ul id="page-errors"></ul>', markdown_html(READING_RECORDED if recorded else READING_SIMULATED)]
+    body += _recorded_body(frame, prov) if recorded else _simulated_body(frame)
     body += ["<h2>Every row</h2>", '<p class="note">One point per row (device); hover for method, '
              "scenario, condition and seed; drag to zoom, double-click to reset.</p>", divs[0],
              "<h2>Accuracy against per-tick cost</h2>", divs[1]]
@@ -113,18 +105,21 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
                  '<p class="note">Drag over a restart to zoom in; the legend toggles methods.</p>', divs[2]]
     for condition in condition_order(frame["condition"].unique()):
         body += [f"<h2>All metrics under <code>{html.escape(condition)}</code></h2>",
-                 '<p class="note">Mean ± 95 % t-interval over seeds; click a header to sort.</p>',
-                 _metrics_table(frame[frame["condition"] == condition])]
+                 '<p class="note">Mean ± 95 % t-interval over seeds, each scenario best first by '
+                 f'<code>{html.escape(column)}</code>; click a header to sort.</p>',
+                 _metrics_table(frame[frame["condition"] == condition], column)]
     if sweeps and not recorded:
-        from rippleb.report.holds import holds_blocks
+        from rippleb.report.holds import blocks_markdown, holds_blocks
 
-        body += [_block(kind, content) for kind, content in holds_blocks(frame, sweeps)]
+        body.append(markdown_html(blocks_markdown(holds_blocks(frame, sweeps))))
     if not recorded:
         from rippleb.report.tuning_table import tuning_parts
 
         intro, table = tuning_parts(prov.get("run", {}).get("tuning"), method_order(frame["method"]))
-        body += ["<h2>How each method was tuned</h2>", f"<p>{_md(intro)}</p>"]
-        body += [_markdown_table(table)] if table else []
+        body += ["<h2>How each method was tuned</h2>", f"<p>{inline_html(intro)}</p>"]
+        body += [table_html(table)] if table else []
+    if "us_per_tick_p99" in frame:
+        body += ["<h2>How timing was taken</h2>", f"<p>{inline_html(timing_note(prov, frame))}</p>"]
     body += ["<h2>Provenance</h2>", _provenance_table(prov)]
     page = ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
             f"<title>{html.escape(title[0].lstrip('# ').replace('`', ''))}</title><script>{ERROR_HOOK}</script>"
@@ -138,41 +133,44 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
 
 # --------------------------------------------------------------------------- tables
 
-def _recorded_body(frame) -> list[str]:
-    """A recorded log's ranking (:mod:`rippleb.report.recorded`): per log, its basis, the table
-    and who leads; then what the truth-free columns cannot tell."""
-    from rippleb.report.recorded import (TRUTH_FREE_CAVEATS, UNITS_NOTE, basis_sentence, leader_sentence,
-                                         log_markdown, ranking_column)
-    from rippleb.report.stats import ok_rows
+def _simulated_body(frame) -> list[str]:
+    """The README's summary (:func:`rippleb.report.sections.summary_sections`), each table best first."""
+    from rippleb.report.sections import summary_sections
 
-    body = []
-    for log in scenario_order(frame["scenario"].unique()):
-        rows = frame[frame["scenario"] == log]
-        column = ranking_column(rows)
-        body += [f"<h2>{_md(f'`{log}`: methods ranked by `{column}`')}</h2>", f"<p>{_md(basis_sentence(column))}</p>"]
-        if len(ok_rows(rows)):
-            body += [_markdown_table(log_markdown(rows)), f'<p class="note">{_md(UNITS_NOTE)}</p>',
-                     f"<p>{_md(leader_sentence(rows, column))}</p>"]
-    return body + ["<h3>What the truth-free columns cannot tell</h3>",
-                   _list(TRUTH_FREE_CAVEATS)]
+    return [markdown_html("\n".join(summary_sections(frame)), sort_tables=True)]
+
+
+def _recorded_body(frame, prov: dict) -> list[str]:
+    """A recorded log's ranking (:mod:`rippleb.report.recorded`), as the README has it."""
+    from rippleb.report.recorded import recorded_tables_markdown
+
+    return [markdown_html(recorded_tables_markdown(frame, prov.get("run", {}).get("joint")))]
 
 
 def metric_columns(frame) -> list[str]:
-    """Every numeric metric column of the rows that has a value, the truth-free ones included."""
+    """Every numeric metric column of the rows that has a value, the truth-free ones and the
+    error against the rebuilt torque included."""
     from rippleb.scoring.metrics import METRIC_COLUMNS
+    from rippleb.scoring.rebuilt import REFERENCE_COLUMNS
     from rippleb.scoring.truthfree import TRUTH_FREE_COLUMNS
 
-    return [c for c in METRIC_COLUMNS + TRUTH_FREE_COLUMNS if c in frame and frame[c].notna().any()]
+    return [c for c in METRIC_COLUMNS + TRUTH_FREE_COLUMNS + REFERENCE_COLUMNS if c in frame and frame[c].notna().any()]
 
 
-def _metrics_table(rows) -> str:
+def _metrics_table(rows, column: str = "rms_error_nm") -> str:
+    """Every metric per method and scenario: the scenarios in their order, in each the methods
+    best first by the mean of ``column`` (those without one last)."""
     columns = metric_columns(rows)
-    stats = {c: {(r.method, r.scenario): r for r in interval_frame(rows, c).itertuples()} for c in columns}
+    stats = {c: {(r.method, r.scenario): r for r in interval_frame(rows, c).itertuples()}
+             for c in dict.fromkeys(columns + [column])}
     head = "".join(f"<th>{html.escape(c)}</th>" for c in ["method", "scenario", "ok"] + columns)
     body = []
-    for m in method_order(rows["method"].unique()):
-        for s in scenario_order(rows.loc[rows["method"] == m, "scenario"].unique()):
-            mine = rows[(rows["method"] == m) & (rows["scenario"] == s)]
+    for s in scenario_order(rows["scenario"].unique()):
+        mine_s = rows[rows["scenario"] == s]
+        means = {m: getattr(stats[column].get((m, s)), "mean", np.nan) for m in mine_s["method"].unique()}
+        for m in sorted(method_order(list(means)), key=lambda m: (not np.isfinite(means[m]),
+                                                                   means[m] if np.isfinite(means[m]) else 0.0)):
+            mine = mine_s[mine_s["method"] == m]
             cells = [f'<td class="text">{html.escape(m)}</td>', f'<td class="text">{html.escape(s)}</td>',
                      f'<td data-v="{(mine["status"] == "ok").mean():.6g}">'
                      f'{(mine["status"] == "ok").sum()}/{len(mine)}</td>']
@@ -185,104 +183,10 @@ def _metrics_table(rows) -> str:
             f'<tbody>{"".join(body)}</tbody></table></div>')
 
 
-def _markdown_table(text: str) -> str:
-    """A GitHub Markdown table (as :mod:`rippleb.report.tables` writes) as a sortable HTML table."""
-    lines = [_cells(line.strip()) for line in text.splitlines() if line.startswith("|")]
-    if len(lines) < 2:
-        return f"<p>{_md(text)}</p>"
-    head = "".join(f"<th>{_md(c.strip())}</th>" for c in lines[0])
-    rows = []
-    for cells in lines[2:]:
-        tds = []
-        for i, c in enumerate(cells):
-            c = c.strip()
-            try:
-                v = float(c.split(" ")[0])
-            except ValueError:
-                v = ""
-            text = i == 0 or v == ""  # names and words left-aligned, numbers right
-            tds.append(f'<td class="{"text" if text else ""}" data-v="{v}">{_md(c)}</td>')
-        rows.append("<tr>" + "".join(tds) + "</tr>")
-    return f'<table class="sortable"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
-
-
 def _provenance_table(prov: dict) -> str:
     from rippleb.report.provenance import provenance_markdown
 
-    return _markdown_table(provenance_markdown(prov))
-
-
-def _block(kind: str, content) -> str:
-    """One block of :func:`rippleb.report.holds.holds_blocks` as HTML."""
-    if kind in ("h2", "h3", "h4"):
-        return f"<{kind}>{_md(content)}</{kind}>"
-    if kind == "ul":
-        return _list(content)
-    return _markdown_table(content) if kind == "table" else f"<p>{_md(content)}</p>"
-
-
-def _list(items) -> str:
-    """Sentences (Markdown back-ticks) as an HTML list."""
-    return "<ul>" + "".join(f"<li>{_md(item)}</li>" for item in items) + "</ul>"
-
-
-def _cells(line: str) -> list[str]:
-    """The cells of one table line ``| a | b |``, as GitHub reads them: split at the bars
-    without a backslash before them (:func:`rippleb.report.markdown.markdown` writes a bar in
-    a cell as ``\\|``), each ``\\|`` made a bar again before the cell is read as Markdown."""
-    cells, current, i = [], [], 1 if line.startswith("|") else 0
-    end = len(line) - 1 if line.endswith("|") and not line.endswith("\\|") else len(line)
-    while i < end:
-        char = line[i]
-        if char == "\\" and line[i + 1:i + 2] == "|":
-            current.append("|")
-            i += 2
-            continue
-        if char == "|":
-            cells.append("".join(current))
-            current = []
-        else:
-            current.append(char)
-        i += 1
-    return cells + ["".join(current)]
-
-
-#: A backslash escape: a backslash and the ASCII punctuation mark it makes literal.
-_ESCAPE = re.compile(r"\\([!-/:-@\[-`{-~])")
-
-
-def _md(text: str) -> str:
-    """The Markdown of a sentence or a table cell as the report writes it, as HTML: its code
-    spans (fenced by runs of backticks) as <code>, its backslash escapes resolved, and every
-    character escaped for HTML (:func:`html.escape`). The same strings as the README, so
-    both pages say the same; :func:`rippleb.printable.markdown_text` and ``markdown_code``
-    wrote whatever they hold that rippleb did not choose."""
-    out, i, plain = [], 0, []
-    while i < len(text):
-        if text[i] == "\\" and i + 1 < len(text) and _ESCAPE.match(text, i):
-            plain.append(text[i + 1])
-            i += 2
-            continue
-        if text[i] == "`":
-            run = len(text[i:]) - len(text[i:].lstrip("`"))
-            fence = text[i:i + run]
-            close = re.compile(f"(?<!`){fence}(?!`)").search(text, i + run)
-            if close is not None:
-                out.append(html.escape("".join(plain)))
-                plain = []
-                body = text[i + run:close.start()]
-                if len(body) > 1 and body[0] == body[-1] == " " and body.strip():
-                    body = body[1:-1]
-                out.append(f"<code>{html.escape(body)}</code>")
-                i = close.end()
-                continue
-            plain.append(fence)
-            i += run
-            continue
-        plain.append(text[i])
-        i += 1
-    out.append(html.escape("".join(plain)))
-    return "".join(out)
+    return table_html(provenance_markdown(prov))
 
 
 # --------------------------------------------------------------------------- figures
@@ -299,9 +203,16 @@ def _hover(rows):
                            + [rows["seed"]])
 
 
-def _color(method: str, index: int) -> str:
-    fallback = ("#9edae5", "#c49c94", "#f7b6d2", "#000000")
-    return COLORS.get(method, fallback[index % len(fallback)])
+def _marker(method: str, index: int) -> dict:
+    """``method``'s marker in a scatter (:mod:`rippleb.report.palette`): colour and symbol."""
+    colour, symbol, _dash = look(method, index)
+    return {"color": colour, "symbol": symbol}
+
+
+def _line(method: str, index: int) -> dict:
+    """``method``'s line in a signal figure: colour and dash."""
+    colour, _symbol, dash = look(method, index)
+    return {"color": colour, "dash": dash}
 
 
 #: Axis titles of the figures per column they may plot (``rms_error_nm``, or what a recorded
@@ -329,7 +240,7 @@ def _rows_figure(frame, column: str = "rms_error_nm"):
             fig.add_trace(go.Scatter(
                 x=[scenarios.index(s) + (i - len(methods) / 2) * 0.08 for s in mine["scenario"]],
                 y=mine[column], mode="markers", name=_text(m), legendgroup=m, showlegend=(k == 1),
-                marker={"color": _color(m, i), "size": 6, "opacity": 0.75},
+                marker={**_marker(m, i), "size": 7, "opacity": 0.8},
                 customdata=_hover(mine),
                 hovertemplate="method %{customdata[0]}<br>scenario %{customdata[1]}<br>condition "
                               "%{customdata[2]}<br>seed %{customdata[3]}<br>" + column + " %{y:.4g}<extra></extra>"),
@@ -350,7 +261,7 @@ def _cost_figure(frame, column: str = "rms_error_nm"):
     for i, m in enumerate(method_order(ok["method"].unique())):
         mine = ok[ok["method"] == m]
         fig.add_trace(go.Scatter(
-            x=mine[cost], y=mine[column], mode="markers", name=_text(m), marker={"color": _color(m, i), "size": 6},
+            x=mine[cost], y=mine[column], mode="markers", name=_text(m), marker={**_marker(m, i), "size": 7},
             customdata=_hover(mine),
             hovertemplate="method %{customdata[0]}<br>scenario %{customdata[1]}<br>condition %{customdata[2]}"
                           "<br>seed %{customdata[3]}<br>" + cost + " %{x:.3g} us<br>" + column
@@ -385,7 +296,7 @@ def _restart_figure(frame, seed, signals):
                              line={"color": "black", "width": 2}))
     for i, m in enumerate(method_order(sig.estimates)):
         fig.add_trace(go.Scatter(x=log.t[pick], y=sig.estimates[m][pick], name=_text(m),
-                                 line={"color": _color(m, i), "width": 1}))
+                                 line={**_line(m, i), "width": 1}))
     fig.update_layout(xaxis={"title": "time [s]", "rangeslider": {"visible": True}},
                       yaxis={"title": "torque [Nm]"}, height=520, margin={"t": 30})
     return fig

@@ -17,24 +17,18 @@ def _amplitude(x: np.ndarray) -> np.ndarray:
     return 2.0 * np.abs(np.fft.rfft((x - x.mean()) * window)) / window.sum()
 
 
-#: One colour and line style per built-in method, the same in every figure.
-METHOD_STYLE = {
-    "raw": ("tab:blue", "-"), "lowpass": ("tab:cyan", "-"), "current-based": ("m", "--"),
-    "order-tracking": ("tab:red", "-"), "order-tracking-no-deadzone": ("tab:orange", "-."),
-    "order-tracking-no-backprop": ("tab:brown", ":"), "switched-notch": ("tab:green", "-"),
-    "kalman-ripple": ("tab:purple", "-"), "spatial-filter": ("tab:blue", "--"),
-    "fourier-lms": ("tab:pink", "-"), "periodic-dob": ("tab:purple", "--"),
-    "gear-aware": ("tab:gray", "--"), "gear-keeping": ("#98df8a", "-"),
-}
 #: Scenarios whose signals the figures need: Table I/Fig. 5/6, speed coverage, restarts.
 SIGNAL_SCENARIOS = ("paper-quintic", "speed-sweep", "stop-restart")
-_OTHER_COLORS = ("tab:olive", "tab:gray", "tab:pink", "k")
 
 
-def style(method: str, index: int = 0) -> dict:
-    """matplotlib keyword arguments of ``method``'s line."""
-    color, ls = METHOD_STYLE.get(method, (_OTHER_COLORS[index % len(_OTHER_COLORS)], "-"))
-    return {"color": color, "ls": ls, "label": plot_text(method)}
+def style(method: str, index: int = 0, *, points: bool = False) -> dict:
+    """matplotlib keyword arguments of ``method``'s line (:mod:`rippleb.report.palette`), with
+    its marker when ``points``: the figures that draw a point per value. Its label is
+    :func:`plot_text`: a method's name is not the report's to trust."""
+    from rippleb.report.palette import matplotlib_marker, matplotlib_style
+
+    return {**matplotlib_style(method, index), "label": plot_text(method),
+            **({"marker": matplotlib_marker(method, index)} if points else {})}
 
 
 def plot_text(value) -> str:

@@ -2,9 +2,13 @@
 
 A recording has no ``torque_true`` and often no ``torque_ref``. Its rows are ranked by the
 best score they hold (:func:`ranking_column`): the error against ``torque_true`` if any row
-has one, else against ``torque_ref``, else the truth-free :data:`TRUTH_FREE_RANKING`
-(``rippleb/scoring/truthfree.py``); every truth-free column is shown beside it with its own rank.
-One log is one device: no intervals. Every number comes from the rows.
+has one; with a model reference, the error against the torque rebuilt from the strain
+(``rms_error_rebuilt_nm``, :mod:`rippleb.scoring.rebuilt`: the model lacks the gear's own torque,
+and the error against it rewards erasing that); with a transducer, the error against it;
+else the truth-free :data:`TRUTH_FREE_RANKING` (``rippleb/scoring/truthfree.py``). Every other
+score is shown beside it with its own rank, and how far the ranking agreed with the truth
+on the panel's nearest joint (:mod:`rippleb.report.agreement`). One log is one device: no
+intervals. Every number comes from the rows, and from the panel's record for that sentence.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ TRUTH_FREE_RANKING = "ripple_wg_nm"
 #: Every column a recorded log's table shows: (header, unit).
 RECORDED_COLUMNS = {
     "rms_error_nm": ("RMS error against torque_true", "Nm"),
+    "rms_error_rebuilt_nm": ("RMS error against the torque rebuilt from the strain", "Nm"),
     "rms_error_ref_nm": ("RMS error against torque_ref", "Nm"),
     "ripple_wg_nm": ("ripple left at WG orders 2, 4, 8", "Nm"),
     "rest_std_nm": ("spread at rest", "Nm"),
@@ -33,6 +38,11 @@ RECORDED_COLUMNS = {
 
 #: What the truth-free columns cannot tell; no number here, so nothing in it can go stale.
 TRUTH_FREE_CAVEATS = [
+    "`rms_error_rebuilt_nm` (a model reference) is the error against the calibrated strain minus a map of "
+    "the gauges' ripple (orders 1-8 of the encoder angle, affine in the load) fitted on this log where the "
+    "motor turns slowly, beside an inertial model of the gear's own torque, which stays in it: an error "
+    "every strain-based estimate shares with the strain (the gauges' gain, hysteresis, drift, noise) is "
+    "not in it, and a ripple that changes with speed counts as torque (docs/metrics.md).",
     "`ripple_wg_nm` is whatever the estimate holds at orders 2, 4 and 8 of the encoder angle while "
     "the joint turns: a real torque at those orders (a load that repeats with the motor angle) "
     "counts as ripple, and an estimate that is wrong in any other way (gain, offset, drift, "
@@ -47,9 +57,10 @@ TRUTH_FREE_CAVEATS = [
 ]
 
 
-#: What a recorded log is ranked by, best first: the first of these that an ok row has. Not
-#: ``rest_std_nm``: its ranking ran against the true one (docs/metrics.md).
-RANKING_ORDER = ("rms_error_nm", "rms_error_ref_nm", TRUTH_FREE_RANKING, "strain_delay_ms")
+#: What a recorded log is ranked by, best first: the first of these that an ok row has
+#: (``rms_error_rebuilt_nm`` only a log with a model reference has). Not ``rest_std_nm``:
+#: its ranking ran against the true one (docs/metrics.md).
+RANKING_ORDER = ("rms_error_nm", "rms_error_rebuilt_nm", "rms_error_ref_nm", TRUTH_FREE_RANKING, "strain_delay_ms")
 
 
 def ranking_column(frame) -> str:
@@ -101,7 +112,7 @@ def log_markdown(rows, name=markdown_text) -> str:
     column = ranking_column(rows)
     table = log_table(rows, column)
     columns = shown_columns(rows)
-    cost = {r.method: r.p50 for r in timing_cells(rows).itertuples()}
+    cost = {r.method: r.p50 for r in timing_cells(rows, measured_rows(rows)).itertuples()}
     lines = []
     for i, r in enumerate(table.to_dict("records"), start=1):
         place = str(i) if np.isfinite(float(r.get(column, np.nan))) else "-"   # nothing to rank it by
@@ -111,17 +122,37 @@ def log_markdown(rows, name=markdown_text) -> str:
     return markdown(lines, heads) + f"\n\n{UNITS_NOTE}"
 
 
+#: The title of the list of what each score cannot tell.
+CAVEATS_TITLE = "What the scores cannot tell"
 #: Under each table: the units, kept out of the headers so the run summary fits a terminal.
 UNITS_NOTE = "Values in Nm (`strain_delay_ms` in ms), each with its rank in that column in brackets."
 
 
-def basis_sentence(column: str) -> str:
-    """Why the table is ranked by ``column``."""
+def basis_sentence(column: str, joint: dict | None = None) -> str:
+    """Why the table is ranked by ``column``, and how far to trust it (the panel's agreement on
+    the joint nearest to ``joint``, ``run.json``'s description of the log's joint)."""
+    from rippleb.report.agreement import trust_sentence
+
+    trust = trust_sentence(column, joint)
+    return _basis(column, (joint or {}).get("reference_kind")) + (f" {trust}" if trust else "")
+
+
+def _basis(column: str, kind: str | None) -> str:
     if column == "rms_error_nm":
         return "Ranked by `rms_error_nm`: the log has `torque_true`, so the error itself is known."
+    if column == "rms_error_rebuilt_nm":
+        return ("The log's `torque_ref` is a model torque, which lacks the gear's own torque: against it, a method "
+                "that erases that real torque looks better. Ranked by `rms_error_rebuilt_nm`, the error against "
+                "the torque rebuilt from the strain (the gauges' ripple taken out, the gear's torque kept); "
+                "`rms_error_ref_nm` is shown beside it.")
     if column == "rms_error_ref_nm":
-        return ("Ranked by `rms_error_ref_nm`, the error against the log's `torque_ref` (a model torque, "
-                "not the torque itself: what the model leaves out counts as error).")
+        if kind == "transducer":
+            return ("Ranked by `rms_error_ref_nm`, the error against the log's `torque_ref`, a torque transducer "
+                    "in series: the real torque, with the transducer's own noise and bandwidth in every row.")
+        return ("Ranked by `rms_error_ref_nm`, the error against the log's `torque_ref`; if it is a model torque "
+                "(the joint file says so in [joint.reference] kind), what the model leaves out counts as error and "
+                "erasing the gear's own torque counts as accuracy: the log turns too little for the torque "
+                "rebuilt from its strain.")
     head = "The log has neither `torque_true` nor `torque_ref`: no error can be computed."
     if column == TRUTH_FREE_RANKING:
         return (f"{head} Ranked by `{column}`, the truth-free score whose ranking agreed best with the "
@@ -149,23 +180,27 @@ def leader_sentence(rows, column: str) -> str:
     return text + "."
 
 
-def recorded_tables_markdown(frame) -> str:
+def recorded_tables_markdown(frame, joint: dict | None = None) -> str:
     """The README's tables for a recorded log: per log, the ranking table and its basis, what
-    the truth-free columns cannot tell, and the rows that did not finish ok."""
+    the scores cannot tell, and the rows that did not finish ok. ``joint``: the log's joint as
+    ``run.json`` records it (for how far to trust the ranking)."""
     parts = []
     for log in scenario_order(frame["scenario"].unique()):
         rows = frame[frame["scenario"] == log]
         column = ranking_column(rows)
-        parts += [f"## {markdown_code(log)}: methods ranked by `{column}`", "", basis_sentence(column), "",
+        parts += [f"## {markdown_code(log)}: methods ranked by `{column}`", "", basis_sentence(column, joint), "",
                   log_markdown(rows) if len(measured_rows(rows)) else "(no rows to rank)", "",
                   f"- {leader_sentence(rows, column)}", ""]
-    parts += ["### What the truth-free columns cannot tell", ""] + [f"- {c}" for c in TRUTH_FREE_CAVEATS] + [""]
+    parts += [f"### {CAVEATS_TITLE}", ""] + [f"- {c}" for c in TRUTH_FREE_CAVEATS] + [""]
     parts += ["## Rows that did not finish ok", "", failed_markdown(frame)]
     return "\n".join(parts)
 
 
-def recorded_summary_text(frame) -> str:
-    """What ``rippleb run --log`` prints when it ends: per log, the ranking table."""
+def recorded_summary_text(frame, joint: dict | None = None) -> str:
+    """What ``rippleb run --log`` prints when it ends: per log, the ranking table and how far
+    to trust it."""
+    from rippleb.report.agreement import trust_sentence
+
     parts = []
     for log in scenario_order(frame["scenario"].unique()):
         rows = frame[frame["scenario"] == log]
@@ -173,6 +208,8 @@ def recorded_summary_text(frame) -> str:
         n_ok = len(measured_rows(rows))
         parts += [f"{escaped(log)}: {plural(n_ok, 'ranked row')} of {len(rows)}, ranked by {column}", ""]
         parts += [log_markdown(rows, escaped) if n_ok else "(no rows to rank)", ""]
+        trust = trust_sentence(column, joint) if n_ok else ""
+        parts += [trust, ""] if trust else []
     failed = frame[~frame["status"].isin(MEASURED)]
     for r in failed.itertuples():
         parts.append(f"- {escaped(r.method)} / {escaped(r.scenario)}: {escaped(r.status)}: "
@@ -180,9 +217,10 @@ def recorded_summary_text(frame) -> str:
     return "\n".join(parts).rstrip()
 
 
-def run_summary(frame) -> str:
-    """The table ``rippleb run`` ends with: :func:`recorded_summary_text` for a recorded log,
-    :func:`rippleb.report.tables.summary_text` for simulated devices."""
+def run_summary(frame, joint: dict | None = None) -> str:
+    """The table ``rippleb run`` ends with: :func:`recorded_summary_text` for a recorded log
+    (``joint`` as ``run.json`` records it), :func:`rippleb.report.tables.summary_text` for
+    simulated devices."""
     if len(frame) and is_recorded(frame):
-        return recorded_summary_text(frame)
+        return recorded_summary_text(frame, joint)
     return summary_text(frame)

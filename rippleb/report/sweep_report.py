@@ -74,12 +74,11 @@ def _plot(frame, column: str, out_dir: Path) -> Path:
             combos = lines.groupby(others, sort=True) if others else [((), lines)]
             for style_i, (combo, line) in zip(itertools.count(), combos):
                 combo = combo if isinstance(combo, tuple) else (combo,)
-                kw = style(method, i)
+                kw = style(method, i, points=True)
                 kw["ls"] = LINESTYLES[style_i % len(LINESTYLES)] if others else kw["ls"]
                 if others:
                     kw["label"] = f"{plot_text(method)} ({', '.join(f'{c}={v:g}' for c, v in zip(others, combo))})"
-                ax.errorbar(line[column], line["mean"], yerr=line["half"].fillna(0.0), marker="o",
-                            ms=3, capsize=3, **kw)
+                ax.errorbar(line[column], line["mean"], yerr=line["half"].fillna(0.0), ms=3, capsize=3, **kw)
         if column in LOG_SCALE:
             ax.set_xscale("log")
         choices = PARAMS[column].choices if column in PARAMS else ()

@@ -125,9 +125,9 @@ def matrix_markdown(frame, column: str) -> str:
     return markdown(lines, ["method"] + [md_text(s) for s in scenarios])
 
 
-def timing_cells(frame):
-    """Per method x scenario: medians over seeds of ``us_per_tick_p50`` and ``_p99`` and
-    whether the cell is noisy (:data:`NOISY_SPREAD`, :data:`NOISY_TAIL`).
+def timing_cells(frame, rows=None):
+    """Per method x scenario of ``rows`` (``frame``'s ok rows unless given): medians over seeds
+    of ``us_per_tick_p50`` and ``_p99``, and whether noisy (:data:`NOISY_SPREAD`, :data:`NOISY_TAIL`).
 
     Returns
     -------
@@ -136,8 +136,8 @@ def timing_cells(frame):
     """
     import pandas as pd
 
-    records = []
-    for (method, scenario), group in ok_rows(frame).groupby(["method", "scenario"], sort=False):
+    records, rows = [], ok_rows(frame) if rows is None else rows
+    for (method, scenario), group in rows.groupby(["method", "scenario"], sort=False):
         p50 = group["us_per_tick_p50"].dropna() if "us_per_tick_p50" in group else pd.Series(dtype=float)
         p99 = group["us_per_tick_p99"].dropna()
         if p99.empty:

@@ -29,12 +29,8 @@ from rippleb.scoring.truthfree import TRUTH_FREE_COLUMNS
 from rippleb.engine.results import RunWarning, copy_rows, row_key, swept_columns
 from rippleb.engine.sealing import sealed_text
 from rippleb.report.publication import SALT_NAME, compare_rows, read_results_exact  # noqa: F401 - re-exported
-from rippleb.report.reading import READING_RECORDED, READING_SIMULATED  # noqa: F401 - re-exported
-from rippleb.report.gear_section import gear_markdown
-from rippleb.report.layouts_section import layouts_markdown
+from rippleb.report.sections import READING_RECORDED, READING_SIMULATED, conditions_note, summary_sections  # noqa: F401
 from rippleb.report.tuning_table import tuning_markdown
-from rippleb.report.verdicts import method_verdicts
-from rippleb.report.claims import split_sentence
 from rippleb.report.stats import (CONFIDENCE, METHOD_ORDER, fmt_interval, interval_frame,  # noqa: F401
                                   method_order, scenario_order, t_interval, with_condition)
 from rippleb.report.table_one import (PAPER_CITATION, PAPER_TABLE_I, TABLE_I_METHODS,  # noqa: F401
@@ -93,29 +89,17 @@ def _warn_implausible(frame, path) -> None:
                       f"{'; ...' if len(bad) > 3 else ''}", RunWarning, stacklevel=3)
 
 
-def tables_markdown(frame) -> str:
+def tables_markdown(frame, joint: dict | None = None) -> str:
     """The README's tables and their sentences: a pure function of the rows, so
     ``tests/test_published.py`` can regenerate it and find it in ``results/README.md``.
-    A recorded log has its own (:mod:`rippleb.report.recorded`)."""
+    A recorded log has its own (:mod:`rippleb.report.recorded`; ``joint``: its joint as
+    ``run.json`` records it)."""
     if is_recorded(frame):
         from rippleb.report.recorded import recorded_tables_markdown
 
-        return recorded_tables_markdown(frame)
+        return recorded_tables_markdown(frame, joint)
     source = "Recorded" if is_recorded(frame) else "Simulated"
-    parts = ["## Headlines", "", split_sentence(frame["seed"].unique()), ""]
-    parts += [f"- {s}" for s in headline_lines(frame)] + [""]
-    parts += ["## Method x condition (mean `rms_error_nm` over the scenarios, 95 % interval)", "",
-              "Per seed (device), the mean RMS error over the scenarios every method finished under "
-              "that condition; then mean ± 95 % t-interval over seeds.", "",
-              condition_summary_markdown(frame), "", "### Who leads under each condition", ""]
-    parts += [f"- {s}" for s in condition_headline(frame)] + [""]
-    parts += gear_markdown(frame) + layouts_markdown(frame)
-    verdicts = method_verdicts(frame)
-    if verdicts:
-        parts += ["### Each method in plain words", "",
-                  "Where it wins and where it breaks, from the table above; why, from what the "
-                  "method assumes of the ripple (its page under docs/methods/).", ""]
-        parts += [f"- {v}" for v in verdicts] + [""]
+    parts = summary_sections(frame)
     for condition, rows in by_condition(frame):
         parts += _condition_section(condition, rows, source)
     parts += ["## Rows that did not finish ok", "", failed_markdown(frame)]
@@ -172,10 +156,12 @@ def readme_markdown(frame, prov: dict, figures: dict, *, published: bool = False
     recorded = is_recorded(frame)
     parts = title_lines(published, recorded, run_dir) + ["", counts_sentence(frame, recorded),
                                                          "", environment_sentence(prov.get("run", {}))]
+    note = conditions_note(frame)
+    parts += ["", note] if note else []
     if not recorded:
         parts += ["", prov.get("sealed") or sealed_text(frame, prov.get("run", {}))]
     parts += ["", READING_RECORDED if recorded else READING_SIMULATED]
-    parts += ["", tables_markdown(frame)]
+    parts += ["", tables_markdown(frame, prov.get("run", {}).get("joint"))]
     if sweeps and not recorded:
         parts += ["", holds_markdown(frame, sweeps)]
     if not recorded:

@@ -52,6 +52,9 @@ class Truth:
     ``strain`` [V] and ``encoder_angle`` [rad], the wave-generator angle from the encoder
     counts (on a simulated log ``wave_angle`` is the true angle, not the encoder's); None
     on a truth built without them.
+    ``reference_kind``, recorded logs with a ``torque_ref`` only: what it is (``transducer`` or
+    ``model``, :data:`rippleb.joint_file.REFERENCE_KINDS`), which decides how a row is scored
+    against it (:mod:`rippleb.scoring.rebuilt`); None for a simulated log, whose ``torque_true`` is known.
     All fields but ``fs``, ``torque_limit`` and the torques are arrays, so a case file stores
     them as such (:data:`TRUTH_ARRAYS`).
     """
@@ -68,6 +71,7 @@ class Truth:
     torque_limit: float | None = None
     strain: np.ndarray | None = None
     encoder_angle: np.ndarray | None = None
+    reference_kind: str | None = None
 
     def remembered(self, key, compute):
         """``compute()``, computed once per ``key`` while this truth lives.
@@ -110,7 +114,8 @@ class Truth:
         the wave generator). A sample is *moving* when the encoder count changed within
         the last ``REST_HOLD_S`` = 10 ms, inclusive: at the paper's 2500 counts/rev this
         treats motor speeds below 2.4 rpm as rest. The whole log is the evaluation window.
-        ``torque_limit`` is :data:`~rippleb.data.MAX_TORQUE_FACTOR` times the rated torque.
+        ``torque_limit`` is :data:`~rippleb.data.MAX_TORQUE_FACTOR` times the rated torque;
+        ``reference_kind`` the log's ``meta["reference_kind"]`` (``model`` if it does not say).
         """
         # imported here: rippleb.dsp compiles the methods' numba kernels at import, which
         # the runner, and with it every CLI command, would otherwise pay for at start-up
@@ -120,7 +125,8 @@ class Truth:
         return cls(fs=log.spec.fs, eval_mask=np.ones(len(log), bool),
                    moving=moving_from_encoder(log.encoder, log.spec.fs), wave_angle=angle,
                    torque_true=log.torque_true, torque_ref=log.torque_ref, strain=log.strain,
-                   encoder_angle=angle, torque_limit=MAX_TORQUE_FACTOR * log.spec.rated_torque)
+                   encoder_angle=angle, torque_limit=MAX_TORQUE_FACTOR * log.spec.rated_torque,
+                   reference_kind=None if log.torque_ref is None else log.meta.get("reference_kind", "model"))
 
 
 #: The array fields of :class:`Truth` besides the torques: what a case file must store.

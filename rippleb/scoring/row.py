@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rippleb.scoring import metrics, truthfree
+from rippleb.scoring import metrics, rebuilt, truthfree
 from rippleb.scoring.metrics import Truth, tick_stats
 from rippleb.scoring.scorable import MEASURED, NO_REFERENCE, NO_REFERENCE_MESSAGE, implausible
 
@@ -90,9 +90,10 @@ def check_estimate(arrays: dict, n_samples: int, n_ticks: int) -> tuple[np.ndarr
 
 
 def score_or_invalid(estimate: np.ndarray, truth: Truth) -> dict:
-    """The accuracy columns of an estimate (:func:`rippleb.scoring.metrics.score`) and its truth-free
-    columns (:func:`rippleb.scoring.truthfree.truth_free_scores`), or, when they
-    cannot stand as an ``ok`` row, ``{"status": "invalid", "message": why}``.
+    """The accuracy columns of an estimate (:func:`rippleb.scoring.metrics.score`), its truth-free
+    columns (:func:`rippleb.scoring.truthfree.truth_free_scores`) and, on a log with a model
+    reference, its error against the rebuilt torque (:func:`rippleb.scoring.rebuilt.reference_scores`);
+    or, when they cannot stand as an ``ok`` row, ``{"status": "invalid", "message": why}``.
 
     Every accuracy column must be finite or NaN (NaN: not defined for this log, e.g. no
     ``torque_true`` in a recording), and the errors against each reference the log has must
@@ -105,7 +106,8 @@ def score_or_invalid(estimate: np.ndarray, truth: Truth) -> dict:
     if why:
         return {"status": "invalid", "message": why}
     with np.errstate(over="ignore", invalid="ignore"):
-        scores = {**metrics.score(estimate, truth), **truthfree.truth_free_scores(estimate, truth)}
+        scores = {**metrics.score(estimate, truth), **truthfree.truth_free_scores(estimate, truth),
+                  **rebuilt.reference_scores(estimate, truth)}
     needed = {c for c, ref in (("rms_error_nm", truth.torque_true), ("max_error_nm", truth.torque_true),
                                 ("rms_error_ref_nm", truth.torque_ref), ("max_error_ref_nm", truth.torque_ref))
               if ref is not None}

@@ -4,7 +4,7 @@ For each condition (and each value of a swept parameter, in a sweep), each other
 per-device difference from ``gear-keeping`` (``--method``): ``rms_error_nm`` averaged over
 the scenarios every method finished on that device, and ``gear_removed_fraction`` averaged
 over the scenarios where it is defined (0.1 Nm RMS of gear torque at least). Statistic: the
-report's own paired lead (:func:`rippleb.report.paired.paired_lead`, a 95 % t interval,
+report's own paired lead (:func:`rippleb.report.paired.paired_test`, a 95 % t interval,
 no Bonferroni correction here: one table per question). Optionally per scenario.
 
     python benchmarks/gear_keeping_table.py runs/base10 runs/gk10 [--by-scenario]
@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from rippleb.report.paired import paired_lead
+from rippleb.report.paired import paired_test
 
 COLUMNS = ("rms_error_nm", "gear_removed_fraction")
 
@@ -58,7 +58,7 @@ def paired_table(frame: pd.DataFrame, method: str = "gear-keeping", by_scenario:
             for column, table in per_device.items():
                 if other not in table or method not in table:
                     continue
-                lead = paired_lead(table[method], table[other])
+                lead = paired_test(table[method], table[other])
                 record.update({f"{column}": lead.mean, f"{column}_half": lead.half,
                                f"{column}_lower": f"{lead.wins}/{lead.n}"})
             out.append(record)

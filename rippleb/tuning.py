@@ -9,8 +9,10 @@ sequence (``scipy.stats.qmc``, seeded, so the points re-run) mapped onto the ran
 rounded to three significant digits (a value a page can quote and a constructor default
 can hold exactly). ``rippleb tune`` (:mod:`rippleb.engine.tuner`) scores each point on
 the ``calibration`` scenario only, against its ``torque_ref`` (the only torque a real
-calibration knows), on every tuning device; :func:`replaces_default` is the rule that
-decides whether the best point becomes the default. The record of the built-ins' tuning
+calibration knows), on every tuning device; :func:`adopted` is the rule that decides
+which point, if any, replaces the default: a paired test over the tuning devices
+(:mod:`rippleb.signed_rank`), not the mean alone, so that a point that wins by the noise
+of a few devices does not move a method. The record of the built-ins' tuning
 ships beside them (:data:`RECORD`, ``methods/tuning.json``, written by ``rippleb tune``);
 the built-ins' defaults are its adopted points (``tests/test_tuning.py``), and every run's
 provenance carries its :func:`summary`. docs/tuning.md says what it found.
@@ -20,8 +22,9 @@ Examples
 >>> points = candidates({"q": (1.0, 100.0, "log")}, {"q": 30.0}, budget=4)
 >>> len(points), points[0]
 (4, {'q': 30.0})
->>> replaces_default([1.0, 2.0, 3.0], [0.9, 1.9, 2.9]), replaces_default([1.0, 2.0], [0.5, 2.1])
-(True, False)
+>>> default = [1.0 + 0.01 * k for k in range(10)]
+>>> adopted([default, [d - 0.05 for d in default], [d + 0.01 for d in default]])
+1
 """
 
 from __future__ import annotations
@@ -32,17 +35,40 @@ from importlib import resources
 
 import numpy as np
 
+from rippleb.signed_rank import ALPHA, holm, signed_rank
+
 KINDS = ("log", "linear", "int")
 #: The seed of the Sobol scrambling: every method sees the same sequence of unit points.
 SEED = 33
 #: Calibration evaluations per method (the default and 15 Sobol points); docs/tuning.md.
 BUDGET = 16
-#: The tuning devices: seeds no published row uses (those are 0-19), one calibration log each.
-SEEDS = (100, 101, 102, 103, 104)
+#: The paired rule's tuning devices, one calibration log each: 20 public seeds that no
+#: development check uses (those are 0-99) and no publication can (its devices are drawn from
+#: a sealed salt); 20, so that the signed-rank test can pass after Holm over 15 points.
+PAIRED_SEEDS = tuple(range(100, 120))
+#: The devices of the built-ins' record (``methods/tuning.json``), made by the former rule:
+#: the first five of :data:`PAIRED_SEEDS`. ``rippleb tune``'s default until the built-ins
+#: are re-tuned under :data:`RULE_ID` (docs/tuning.md, "Re-tuning under the paired rule").
+SEEDS = PAIRED_SEEDS[:5]
 CRITERION = ("mean rms_error_ref_nm (against torque_ref) of the method fitted on the calibration "
              "log of each tuning device and run on that same log")
-RULE = ("the point of lowest mean replaces the default only when it is better on every tuning "
-        "device (paired); otherwise the default stays")
+#: The rule, by name (a record keeps it in ``protocol.rule_id``) and in words.
+RULE_ID = "holm-signed-rank"
+RULE = ("a point replaces the default only when the one-sided Wilcoxon signed-rank test of its "
+        "per-device differences from the default says it is lower, at 5 % after Holm's correction over "
+        "the budget-1 points tried; of the points that pass, the one of lowest mean; otherwise the "
+        "default stays")
+#: The former rule (records made before :data:`RULE_ID` name none): the point of lowest
+#: mean, only when better on every tuning device.
+EVERY_DEVICE = "every-device"
+EVERY_DEVICE_RULE = ("the point of lowest mean replaces the default only when it is better on every tuning "
+                     "device (paired); otherwise the default stays")
+#: The rules ``rippleb tune --rule`` runs, by name, in words.
+RULES = {RULE_ID: RULE, EVERY_DEVICE: EVERY_DEVICE_RULE}
+#: The rule of the built-ins' record, ``rippleb tune``'s default: the record was made by the
+#: former rule on :data:`SEEDS`, and re-tuning every built-in under :data:`RULE_ID` on
+#: :data:`PAIRED_SEEDS` (which changes defaults, and so every published row) is not done yet.
+PROTOCOL_RULE = EVERY_DEVICE
 #: The record of the built-ins' tuning, in the methods package.
 RECORD = "tuning.json"
 
@@ -88,8 +114,37 @@ def _scale(u: float, low: float, high: float, kind: str):
     return min(max(float(f"{value:.3g}"), low), high)
 
 
+def adopted(scores, rule: str = RULE_ID) -> int:
+    """The index of the point the rule adopts; 0 (the default) when none replaces it.
+
+    ``scores[i]`` holds point ``i``'s score on each tuning device, ``scores[0]`` the
+    default's. Under :data:`RULE_ID` a point must beat the default by :func:`pvalues`;
+    under :data:`EVERY_DEVICE` (the former rule) the point of lowest mean must be lower on
+    every device.
+    """
+    best = best_of(scores)
+    if rule == EVERY_DEVICE:
+        return best if best != 0 and replaces_default(scores[0], scores[best]) else 0
+    if rule != RULE_ID:
+        raise ValueError(f"unknown tuning rule {rule!r}")
+    passing = [i for i, p in enumerate(pvalues(scores)) if i and p < ALPHA]
+    return min(passing, key=lambda i: (float(np.mean(scores[i])), i)) if passing else 0
+
+
+def pvalues(scores) -> list[float]:
+    """Per point, the Holm-adjusted p-value of the one-sided signed-rank test that it is lower
+    than the default on the tuning devices (NaN for the default itself; 1 for a point that
+    failed on some device)."""
+    default = np.asarray(scores[0], float)
+    raw = []
+    for point in scores[1:]:
+        point = np.asarray(point, float)
+        raw.append(signed_rank(default - point, "greater")[0] if np.all(np.isfinite(point)) else 1.0)
+    return [float("nan")] + holm(raw)
+
+
 def replaces_default(default_scores, best_scores) -> bool:
-    """:data:`RULE`: the best point is better than the default on every tuning device."""
+    """The former rule: the best point is better than the default on every tuning device."""
     default_scores, best_scores = np.asarray(default_scores), np.asarray(best_scores)
     return bool(len(best_scores) and np.all(best_scores < default_scores))
 
@@ -98,6 +153,11 @@ def best_of(scores: list[list[float]]) -> int:
     """Index of the point of lowest mean score over the devices (the earliest of equals);
     ``scores[0]`` is the default's."""
     return int(np.argmin([float(np.mean(s)) for s in scores]))
+
+
+def rule_of(record: dict) -> str:
+    """The rule a record was made by (records older than :data:`RULE_ID` name none)."""
+    return record.get("protocol", {}).get("rule_id", EVERY_DEVICE)
 
 
 def adopted_points(record, source: str) -> dict[str, dict]:
@@ -139,6 +199,6 @@ def summary() -> dict:
         return {"error": f"no tuning record: {exc}"}
     record = read_record(text)
     return {"sha256": hashlib.sha256(text.encode()).hexdigest(), "protocol": record["protocol"],
-            "methods": {name: {k: entry.get(k) for k in ("adopted", "replaced", "evaluations",
+            "methods": {name: {k: entry.get(k) for k in ("adopted", "best", "replaced", "evaluations",
                                                            "default_score", "best_score", "note")}
                         for name, entry in record["methods"].items()}}

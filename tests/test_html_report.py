@@ -53,7 +53,8 @@ def test_page_is_self_contained_with_tables_per_condition_and_headline(tmp_path)
     assert page.count("Plotly.newPlot") == 2  # rows and cost; no signals without a figure seed
     assert "All metrics under <code>same-session</code>" in page
     assert "All metrics under <code>re-assembled</code>" in page
-    assert "The lowest mean depends on the condition" in page
+    assert "Over every device, the lowest mean depends on the condition" in page
+    assert "<h2>Headlines</h2>" in page and "No claim of who leads under a condition replicated" in page
     assert page.count('class="sortable"') == 4  # summary, two conditions, provenance
     assert "report of <code>runs/x</code>" in page
     assert "How each method was tuned" in page and "Not recorded" in page

@@ -25,6 +25,7 @@ import pytest
 import rippleb
 from rippleb import Method
 from rippleb.engine import sealing
+from rippleb.errors import InputError
 from rippleb.cli import main
 from test_bad_input import _dist  # a minimal installed distribution without pip
 
@@ -399,7 +400,8 @@ def test_sealed_options_that_cannot_apply_are_refused(tmp_path, monkeypatch, cap
     (tmp_path / "taken").write_text("x")
     cases = [(["--out", "a", "--sealed", "taken"], "taken: --sealed writes a new salt file and never overwrites"),
              (["--out", "b", "--sealed", "b/salt"], "must be outside the run directory"),
-             (["--out", "c", "--salt-file", "taken"], "--salt-file applies only with --resume"),
+             (["--out", "c", "--salt-file", "taken"], "taken: not a rippleb salt file"),
+             (["--out", "e", "--sealed", "s", "--salt-file", "taken"], "give one of them"),
              (["--out", "d", "--sealed", "s", "--executor", "dask"], "run on the local pool only")]
     for extra, words in cases:
         assert _run(tmp_path, *extra) == 2, extra
@@ -407,6 +409,8 @@ def test_sealed_options_that_cannot_apply_are_refused(tmp_path, monkeypatch, cap
         assert words in err and len(err.strip().splitlines()) == 1, err
     assert main(["run", "--log", "rec.csv", "--sealed", "s"]) == 2
     assert "--sealed does not apply with --log" in capsys.readouterr().err
+    assert main(["run", "--log", "rec.csv", "--salt-file", "taken"]) == 2
+    assert "--salt-file does not apply with --log" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["taken"]    # nothing written
 
 
@@ -419,3 +423,15 @@ def test_salt_files_and_commitments():
     assert seal.hex() == "00" * 32
     assert sealing.redact(["run", "--sealed", "/x/s", "--salt-file=/y", "--out", "o"]) == \
         ["run", "--sealed", "SALT_FILE", "--salt-file=SALT_FILE", "--out", "o"]
+
+
+def test_only_the_salt_of_a_sealed_run_is_published(tmp_path):
+    """``rippleb report --salt-file``: the salt must match the commitment the run recorded."""
+    salt = bytes(range(32))
+    path = tmp_path / "salt"
+    path.write_text(salt.hex() + "\n")
+    assert sealing.published_salt({"sealed": {"commitment": sealing.commitment(salt)}}, path) == salt
+    with pytest.raises(InputError, match="the run is not sealed"):
+        sealing.published_salt({}, path)
+    with pytest.raises(InputError, match="not the salt of this run"):
+        sealing.published_salt({"sealed": {"commitment": sealing.commitment(bytes(32))}}, path)

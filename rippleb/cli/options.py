@@ -26,7 +26,9 @@ def add_seal_options(p) -> None:
                         "to let others verify")
     p.add_argument("--salt-file", type=Path, metavar="FILE",
                    help="with --resume of a sealed run: the salt file --sealed wrote ('-': read it "
-                        "from standard input)")
+                        "from standard input); without --resume: run on the devices of that salt, e.g. "
+                        "to re-run rows of a published sealed comparison and compare them (a replay: "
+                        "the salt is known, so the rows are no sealed comparison themselves)")
 
 
 def check_run_options(args) -> None:
@@ -38,11 +40,12 @@ def check_run_options(args) -> None:
                 hint = "; a sealed run is resumed with --salt-file FILE" if flag == "--sealed" else ""
                 raise InputError(f"{flag} does not apply with --resume {args.resume} (the run directory "
                                  f"and its selection are those of {args.resume}/run.json{hint})")
-    elif getattr(args, "salt_file", None) is not None:
-        raise InputError("--salt-file applies only with --resume DIR of a sealed run (a new sealed run "
-                         "draws its own salt: --sealed FILE)")
-    if getattr(args, "log", None) is not None and getattr(args, "sealed", None) is not None:
-        raise InputError("--sealed does not apply with --log (a recorded log has no seeds to seal)")
+    elif getattr(args, "salt_file", None) is not None and getattr(args, "sealed", None) is not None:
+        raise InputError("--sealed draws a new salt and --salt-file re-runs the devices of a given one; "
+                         "give one of them")
+    for flag in ("--sealed", "--salt-file"):
+        if getattr(args, "log", None) is not None and getattr(args, flag[2:].replace("-", "_"), None) is not None:
+            raise InputError(f"{flag} does not apply with --log (a recorded log has no seeds to seal)")
 
 
 def check_sweep_options(args) -> None:

@@ -32,6 +32,14 @@ def add_report(sub) -> None:
     p.add_argument("--published", action="store_true",
                    help="title and caveats of the project's published comparison (results/, see "
                         "docs/report.md); without it the report says it is the report of one run")
+    p.add_argument("--salt-file", type=Path, metavar="FILE",
+                   help="publish the salt of a sealed run (the file 'rippleb run --sealed' wrote) as "
+                        "OUT/salt.txt, checked against the run's commitment, so that anyone can re-run "
+                        "its rows on the same devices; OUT must be outside DIR")
+    p.add_argument("--sweep", type=Path, action="append", default=[], metavar="SWEEP",
+                   help="a sweep's rows (the directory of a 'rippleb sweep' run, or of its report): the "
+                        "report's conclusions are re-evaluated at each swept value in the section 'Where "
+                        "each conclusion holds' (repeat for several sweeps)")
     p.set_defaults(func=cmd_report)
 
 
@@ -46,7 +54,8 @@ def cmd_report(args) -> int:
         seeds = args.speed_seeds
     written = report(args.dir, args.out, figures=not args.no_figures, figure_seed=args.figure_seed,
                      argv=args.argv, published=args.published, html=args.html,
-                     figure_format=args.format, speed_seeds=seeds)
+                     figure_format=args.format, speed_seeds=seeds, salt_file=args.salt_file,
+                     sweeps=args.sweep)
     for warning in written["warnings"]:
         print(f"rippleb: warning: {escaped(warning)}", file=sys.stderr)
     print(f"wrote {written['readme']}, {written['csv']}, {written['provenance']}"

@@ -211,7 +211,8 @@ def _run(args, start: float) -> int:
                            runner.DEFAULT_SEEDS if args.seeds is None else args.seeds,
                            conditions=args.conditions, seed_start=args.seed_start or 0, jobs=args.jobs,
                            out=args.out_dir, timeout=timeout, memory_mb=memory, progress=progress,
-                           on_start=started, executor=executor(args), sealed=args.sealed)
+                           on_start=started, executor=executor(args), sealed=args.sealed,
+                           salt_file=args.salt_file)
     from rippleb.report.provenance import read_run_provenance
     from rippleb.report.recorded import run_summary
 

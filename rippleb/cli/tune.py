@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 from rippleb.errors import InputError
-from rippleb.tuning import BUDGET, CRITERION, RULE, SEED, SEEDS
+from rippleb.tuning import BUDGET, CRITERION, PAIRED_SEEDS, PROTOCOL_RULE, RULE_ID, RULES, SEED, SEEDS
 
 #: The largest ``--budget``: 1024 points a method (64 times the protocol's 16), each fitted
 #: and run on every tuning device, is hours of CPU a method; ``--budget 1000000`` was
@@ -30,7 +30,7 @@ def add_tune(sub) -> None:
         description="Tune methods' declared parameters (their 'tunable' ranges) by one protocol: the "
                     f"default and budget-1 Sobol points (seed {SEED}), each fitted and run on the "
                     "calibration log of each tuning device and scored against torque_ref (never a "
-                    f"scored scenario, never torque_true). Rule: {RULE}. Prints one line per method "
+                    f"scored scenario, never torque_true). Rule (--rule): {RULES[PROTOCOL_RULE]}. Prints one line per method "
                     "and writes the record as JSON (docs/tuning.md); 'rippleb run --tuning FILE' runs "
                     "each method at the point the rule adopted.")
     p.add_argument("--methods", help="comma-separated method names (default: every built-in)")
@@ -43,7 +43,15 @@ def add_tune(sub) -> None:
                    help=f"points evaluated in parallel processes (default: the number of CPUs, {os.cpu_count()} here)")
     p.add_argument("--out", type=Path, help="JSON file for the record (written after each method); "
                                             "'rippleb run --tuning FILE' runs the adopted points")
+    p.add_argument("--rule", choices=sorted(RULES), default=PROTOCOL_RULE,
+                   help=f"the adoption rule (default {PROTOCOL_RULE}, the built-ins' record's): {RULE_ID}: "
+                        f"{RULES[RULE_ID]} (needs 20 devices, e.g. --seeds {PAIRED_SEEDS[0]}-{PAIRED_SEEDS[-1]}); "
+                        f"every-device: {RULES['every-device']}")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--compare", nargs=2, type=Path, metavar=("A.json", "B.json"),
+                   help="tune nothing: print the stability table of two records made on disjoint sets of "
+                        "tuning devices (the point each adopts, and what each choice costs on the other "
+                        "set's devices; docs/tuning.md)")
     p.set_defaults(func=cmd_tune)
 
 
@@ -55,6 +63,8 @@ def cmd_tune(args) -> int:
     from rippleb.registry import Registry
     from rippleb.version import __version__
 
+    if args.compare is not None:
+        return compare(args)
     seeds = parse_seeds(args.seeds)
     if not 1 <= args.budget <= MAX_BUDGET:
         raise InputError(f"--budget must be a whole number in 1-{MAX_BUDGET} (the protocol's is {BUDGET}), "
@@ -68,7 +78,8 @@ def cmd_tune(args) -> int:
         raise InputError(f"--out {args.out}: is a directory; give a file name (e.g. {args.out / 'tuning.json'})")
     planned = plan(names, registry, args.budget)
     total = sum(len(points) for _, points, _ in planned.values())
-    record = {"protocol": {"budget": args.budget, "seeds": seeds, "criterion": CRITERION, "rule": RULE,
+    record = {"protocol": {"budget": args.budget, "seeds": seeds, "criterion": CRITERION, "rule": RULES[args.rule],
+                           "rule_id": args.rule,
                            "sampler": f"the default, then budget-1 points of a scrambled Sobol sequence "
                                       f"(scipy.stats.qmc, seed {SEED}), 3 significant digits"},
               "rippleb_version": __version__, "methods": {}}
@@ -81,9 +92,20 @@ def cmd_tune(args) -> int:
                 _write(args.out, record)
             bar.write(line(name, entry, args.out))
 
-        tune(planned, seeds, args.jobs, on_method=finished, on_point=bar.update)
+        tune(planned, seeds, args.jobs, on_method=finished, on_point=bar.update, rule=args.rule)
     if args.out is not None:
         print(f"record written to {args.out}", file=sys.stderr)
+    return 0
+
+
+def compare(args) -> int:
+    """``rippleb tune --compare A.json B.json``: the stability table, on standard output."""
+    from rippleb.report.tuning_stability import read, stability_markdown
+
+    given = [flag for flag, value in (("--methods", args.methods), ("--out", args.out)) if value is not None]
+    if given:
+        raise InputError(f"{given[0]} does not apply with --compare (it reads two records and tunes nothing)")
+    print(stability_markdown(*(read(path) for path in args.compare)))
     return 0
 
 
@@ -94,16 +116,19 @@ def line(name: str, entry: dict, out: Path | None = None) -> str:
 
     if entry["evaluations"] == 1:
         return f"{name}: {entry['default_score']:.3f} Nm at its defaults; {entry['note']}"
+    if not entry["replaced"]:
+        verdict = "default kept" + (" (no point beats it by the rule)" if entry["best"] != entry["default"]
+                                    else " (the best point is the default)")
+    else:
+        how = f" or --tuning {out}" if out is not None else " (or write the record with --out FILE and pass --tuning FILE)"
+        which = ("the best point replaces the default" if entry["adopted"] == entry["best"] else
+                 f"{', '.join(f'{k}={v:g}' for k, v in entry['adopted'].items())} replaces the default "
+                 f"(the best point does not pass the rule)")
+        verdict = (f"{which}; its constructor's default is unchanged: run it with "
+                   f"--methods '{label(name, entry['adopted'])}'{how}")
     best = ", ".join(f"{k}={v:g}" for k, v in entry["best"].items())
     text = (f"{name}: default {entry['default_score']:.3f} Nm, best {entry['best_score']:.3f} Nm at "
-            f"{best} ({entry['evaluations']} evaluations): ")
-    if entry["replaced"]:
-        how = f" or --tuning {out}" if out is not None else " (or write the record with --out FILE and pass --tuning FILE)"
-        text += (f"better on every tuning device, adopted; its constructor's default is unchanged: run it with "
-                 f"--methods '{label(name, entry['adopted'])}'{how}")
-    else:
-        text += "default kept" + (" (the best point is not better on every device)"
-                                  if entry["best"] != entry["default"] else "")
+            f"{best} ({entry['evaluations']} evaluations): {verdict}")
     return text + (f"; {len(entry['errors'])} error(s): {entry['errors'][0]}" if entry["errors"] else "")
 
 

@@ -112,6 +112,8 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, s
         ``sealed = True``. Needs ``out``; not with an ``executor``.
     salt_file
         With ``resume`` of a sealed run: the file ``sealed`` wrote (``"-"``: standard input).
+        Without ``resume``: run on the devices of that salt, e.g. to re-run rows of a
+        published sealed comparison (``run.json`` marks the run a replay).
 
     Returns
     -------

@@ -117,44 +117,55 @@ def check_new_salt_path(path, out) -> Path:
     return path
 
 
+#: ``run.json``'s mark of a run on the devices of a salt it was given (``--salt-file``
+#: without ``--resume``): a replay of a sealed comparison, not one itself.
+GIVEN = "given"
+
+
 def open_seal(out, resume: bool, config: dict, *, sealed, salt_file) -> Seal | None:
     """The seal of this run, drawn or read now: call it after the fork server started.
 
-    A new run with ``sealed`` (the salt file to write at the end) draws a salt; a resumed
-    run reads the salt of ``out/run.json``'s commitment from ``salt_file``. Sets
-    ``config["sealed"]`` to the commitment, so ``run.json`` records it and ``--resume``
-    compares it.
+    A new run with ``sealed`` (the salt file to write at the end) draws a salt; a new run
+    with ``salt_file`` re-runs the devices of that salt (a published one, to verify its
+    rows: ``run.json`` marks it ``"salt": "given"``); a resumed run reads the salt of
+    ``out/run.json``'s commitment from ``salt_file``. Sets ``config["sealed"]`` to the
+    commitment, so ``run.json`` records it and ``--resume`` compares it.
     """
     if not resume:
-        if salt_file is not None:
-            raise InputError("--salt-file applies only with --resume (of a sealed run); "
-                             "a new sealed run draws its salt: --sealed FILE")
-        if sealed is None:
+        if sealed is not None and salt_file is not None:
+            raise InputError("--sealed draws a new salt and --salt-file re-runs the devices of a given one; "
+                             "give one of them")
+        if sealed is None and salt_file is None:
             return None
         if out is None:
             raise InputError("a sealed run needs an output directory (its run.json records the "
                              "salt's commitment)")
+        if salt_file is not None:
+            seal = Seal(read_salt(salt_file), read_from=None if str(salt_file) == "-" else Path(salt_file))
+            config["sealed"] = {"commitment": seal.commitment, "salt": GIVEN}
+            return seal
         seal = Seal(draw_salt(), save_to=Path(sealed))
-    else:
-        if sealed is not None:
-            raise InputError("--sealed starts a new sealed run; to resume one, give its salt with "
-                             "--salt-file FILE")
-        seal = _resumed_seal(Path(out), salt_file)
-        if seal is None:
-            return None
-    config["sealed"] = {"commitment": seal.commitment}
+        config["sealed"] = {"commitment": seal.commitment}
+        return seal
+    if sealed is not None:
+        raise InputError("--sealed starts a new sealed run; to resume one, give its salt with "
+                         "--salt-file FILE")
+    from rippleb.engine.rundir import read_config
+
+    saved = read_config(Path(out)).get("sealed")
+    seal = _resumed_seal(Path(out), saved, salt_file)
+    if seal is not None:
+        config["sealed"] = dict(saved)
     return seal
 
 
-def _resumed_seal(out: Path, salt_file) -> Seal | None:
-    from rippleb.engine.rundir import read_config
-
-    saved, where = read_config(out), out / "run.json"
-    if "sealed" not in saved:
+def _resumed_seal(out: Path, saved, salt_file) -> Seal | None:
+    where = out / "run.json"
+    if saved is None:
         if salt_file is not None:
             raise InputError(f"{where}: not a sealed run; drop --salt-file")
         return None
-    expected = saved["sealed"]["commitment"]
+    expected = saved["commitment"]
     if salt_file is None:
         raise InputError(f"{where}: a sealed run ({expected[:19]}...); --resume needs its salt: "
                          f"add --salt-file FILE (the file --sealed wrote)")
@@ -258,12 +269,31 @@ def sealed_text(frame, run: dict) -> str:
         return ("Not sealed: these devices are those of the public seeds, which a method could "
                 "re-simulate to read off the truth; a comparison that matters runs sealed "
                 "(`rippleb run --sealed FILE`, docs/robustness.md).")
-    commitment_text = ((run.get("sealed") or {}).get("commitment") if isinstance(run.get("sealed"), dict)
-                       else None) or "not recorded"
+    recorded = run.get("sealed") if isinstance(run.get("sealed"), dict) else {}
+    commitment_text = recorded.get("commitment") or "not recorded"
     if sealed < n:
         return (f"Partly sealed: {sealed} of {n} rows ran on devices drawn from a secret salt, the "
                 f"others on the public seeds' devices (rows of different runs mixed?); only the "
                 f"sealed rows are safe from a method that re-simulates its scenario.")
+    if recorded.get("salt") == GIVEN:
+        return (f"Replayed: all {n} rows ran on the devices of a salt given to the run (commitment "
+                f"`{commitment_text}` in run.json), to verify a sealed comparison's rows; the salt was "
+                f"known before the run, so these rows are no sealed comparison themselves.")
     return (f"Sealed: all {n} rows ran on devices drawn from a secret salt (commitment "
             f"{markdown_code(commitment_text)} in run.json), so no method could re-simulate them; the signal "
             f"figures, re-simulated by the report, show the public seeds' devices instead.")
+
+
+def published_salt(run: dict, salt_file) -> bytes:
+    """The salt of the sealed run whose ``run.json`` said ``run`` (its provenance), read
+    from ``salt_file`` and checked against the run's commitment, to publish beside its
+    report (``rippleb report --salt-file``); one line naming the file otherwise."""
+    recorded = run.get("sealed") if isinstance(run.get("sealed"), dict) else {}
+    if not recorded.get("commitment"):
+        raise InputError(f"--salt-file {salt_file}: the run is not sealed (its run.json records no "
+                         f"commitment): there is no salt to publish")
+    salt = read_salt(salt_file)
+    if commitment(salt) != recorded["commitment"]:
+        raise InputError(f"{_name(salt_file)}: not the salt of this run (its SHA-256 differs from the "
+                         f"commitment {recorded['commitment'][:19]}... in run.json)")
+    return salt

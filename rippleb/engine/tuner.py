@@ -23,7 +23,7 @@ import numpy as np
 
 from rippleb.errors import PluginError
 from rippleb.registry import Registry
-from rippleb.tuning import best_of, candidates, check_tunable, replaces_default
+from rippleb.tuning import PROTOCOL_RULE, adopted, best_of, candidates, check_tunable, pvalues
 from rippleb.variants import label
 
 #: What a method without a ``tunable`` attribute is recorded with.
@@ -70,13 +70,14 @@ def _declaration(entry) -> bytes:
 
 
 def tune(planned: dict, seeds, jobs: int = 1, on_method=None, on_point=None, timeout: float | None = None,
-         memory_mb: float | None = None, registry: Registry | None = None) -> dict:
+         memory_mb: float | None = None, registry: Registry | None = None, rule: str = PROTOCOL_RULE) -> dict:
     """Run the :func:`plan` ``planned`` on the calibration logs of ``seeds``; returns
     ``{name: entry}`` (see docs/tuning.md).
 
     ``on_method(name, entry)`` is called as each method finishes (to write the record),
     ``on_point()`` after each evaluation (a progress bar); ``timeout`` and ``memory_mb``
-    are a row's limits (:func:`rippleb.engine.runner.run`'s defaults when None).
+    are a row's limits (:func:`rippleb.engine.runner.run`'s defaults when None); ``rule``
+    the adoption rule (:data:`rippleb.tuning.RULES`).
     """
     from rippleb.engine.runner import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, run_plan
 
@@ -101,7 +102,7 @@ def tune(planned: dict, seeds, jobs: int = 1, on_method=None, on_point=None, tim
         if not points_left[name]:
             tunable, tried, note = planned[name]
             found = [(p, *_per_device([scores[(lab, s)] for s in seeds])) for lab, p in zip(labels[name], tried)]
-            results[name] = entry(tunable, found, note, time.perf_counter() - start)
+            results[name] = entry(tunable, found, note, time.perf_counter() - start, rule)
             if on_method:
                 on_method(name, results[name])
 
@@ -144,15 +145,18 @@ def _per_device(found: list[tuple[float, str]]) -> tuple[list[float], str]:
     return [s for s, _ in found], next((e for _, e in found if e), "")
 
 
-def entry(tunable: dict, tried: list[tuple[dict, list[float], str]], note: str, seconds: float) -> dict:
-    """One method's record: every point with its scores, the best, the rule's verdict."""
-    best = best_of([s for _, s, _ in tried])
+def entry(tunable: dict, tried: list[tuple[dict, list[float], str]], note: str, seconds: float,
+          rule: str = PROTOCOL_RULE) -> dict:
+    """One method's record: every point with its scores, the best, ``rule``'s verdict."""
+    scores = [s for _, s, _ in tried]
+    best, kept = best_of(scores), adopted(scores, rule)
     default, chosen = tried[0], tried[best]
-    replaced = best != 0 and replaces_default(default[1], chosen[1])
+    replaced = kept != 0
     errors = sorted({e for _, _, e in tried if e})
     return {"tunable": {k: list(v) for k, v in tunable.items()}, "note": note,
             "default": default[0], "default_scores": default[1], "default_score": float(np.mean(default[1])),
             "best": chosen[0], "best_scores": chosen[1], "best_score": float(np.mean(chosen[1])),
-            "replaced": replaced, "adopted": chosen[0] if replaced else default[0],
+            "replaced": replaced, "adopted": tried[kept][0], "adopted_scores": tried[kept][1],
             "evaluations": len(tried), "seconds": round(seconds, 1), "errors": errors,
-            "points": [{"params": p, "scores": s} for p, s, _ in tried]}
+            "points": [{"params": p, "scores": s, "p_holm": q if np.isfinite(q) else None}
+                       for (p, s, _), q in zip(tried, pvalues(scores))]}

@@ -52,7 +52,8 @@ x.textContent.localeCompare(y.textContent):(u-v);return asc?r:-r;});
 rows.forEach(function(r){tb.appendChild(r);});});});"""
 
 
-def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals: dict | None = None) -> Path:
+def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals: dict | None = None,
+               sweeps=()) -> Path:
     """Write the interactive report of ``frame`` to ``path`` and return it.
 
     Its explanatory sections are the README's own (:mod:`rippleb.report.sections`,
@@ -71,6 +72,9 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
     signals
         ``{scenario: ScenarioSignals}`` already streamed for ``figure_seed`` (saves
         re-simulating them).
+    sweeps
+        ``[(name, rows)]`` of the sweeps the conclusions are re-evaluated on
+        (:mod:`rippleb.report.holds`).
     """
     from rippleb.report.recorded import ranking_column
     from rippleb.report.sections import READING_RECORDED, READING_SIMULATED, conditions_note
@@ -104,6 +108,10 @@ def write_html(frame, prov: dict, path, figure_seed: int | None = None, signals:
                  '<p class="note">Mean ± 95 % t-interval over seeds, each scenario best first by '
                  f'<code>{html.escape(column)}</code>; click a header to sort.</p>',
                  _metrics_table(frame[frame["condition"] == condition], column)]
+    if sweeps and not recorded:
+        from rippleb.report.holds import blocks_markdown, holds_blocks
+
+        body.append(markdown_html(blocks_markdown(holds_blocks(frame, sweeps))))
     if not recorded:
         from rippleb.report.tuning_table import tuning_parts
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from rippleb.layouts import DEFAULT_LAYOUT, layout
 from rippleb.report.markdown import markdown
-from rippleb.report.paired import paired_lead
+from rippleb.report.paired import paired_test
 from rippleb.report.stats import condition_order, fmt_interval, method_order, ok_rows, t_interval
 
 LAYOUT_COLUMN = "gauges.layout"
@@ -70,7 +70,7 @@ def combination_table(frame, condition: str):
         mean, half, n = t_interval(series)
         reference = errors[(errors["layout"] == DEFAULT_LAYOUT) & (errors["misalignment"] == misalignment)
                            & (errors["method"] == method)].set_index("seed")["value"]
-        lead = paired_lead(series, reference) if name != DEFAULT_LAYOUT and len(reference) else None
+        lead = paired_test(series, reference) if name != DEFAULT_LAYOUT and len(reference) else None
         ripple_mean = np.nan
         if ripple is not None:
             mine = ripple[(ripple["condition"] == condition) & (ripple["layout"] == name)

@@ -202,7 +202,7 @@ def provenance_markdown(prov: dict) -> str:
             ["jobs (rows run in parallel)", text(run.get("jobs", "not recorded"))],
             ["CPUs of the run's machine", text(run.get("cpu_count", "not recorded"))],
             ["seeds", prov["seeds_text"]],
-            ["sealed", _sealed_cell(run)],
+            ["sealed", _sealed_cell(run, prov.get("salt"))],
             ["rippleb", text(run.get("rippleb_version", prov.get("rows_rippleb_version", "not recorded")))],
             ["git commit of the run", text(git_text(run))],
             ["Python", text(run.get("python", prov.get("rows_python", "not recorded")))],
@@ -243,10 +243,16 @@ def environment_sentence(run: dict) -> str:
     return f"Made with {names} on {how} (docs/reproducibility.md; all versions under Provenance)."
 
 
-def _sealed_cell(run: dict) -> str:
+def _sealed_cell(run: dict, salt: str | None = None) -> str:
+    """The provenance's ``sealed`` cell; ``salt`` names the salt file a report published."""
+    from rippleb.engine.sealing import GIVEN
+
     sealed = run.get("sealed")
     if isinstance(sealed, dict) and sealed.get("commitment"):
-        return f"yes: devices drawn from a secret salt, commitment {markdown_code(sealed['commitment'])}"
+        if sealed.get("salt") == GIVEN:
+            return f"replayed: devices of a given salt, commitment {markdown_code(sealed['commitment'])}"
+        text = f"yes: devices drawn from a secret salt, commitment {markdown_code(sealed['commitment'])}"
+        return text + (f"; the salt is published beside this report in {markdown_code(salt)}" if salt else "")
     return "no: public seeds"
 
 

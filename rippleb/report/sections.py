@@ -12,7 +12,7 @@ from rippleb.report.gear_section import gear_markdown
 from rippleb.report.layouts_section import layouts_markdown
 from rippleb.report.markdown import plural
 from rippleb.report.stats import condition_order, with_condition
-from rippleb.report.tables import condition_headline, condition_summary_markdown, is_recorded
+from rippleb.report.tables import condition_headline, condition_summary_markdown, headline_lines, is_recorded
 from rippleb.report.verdicts import method_verdicts
 
 # What the tables can and cannot say; no numbers here, so nothing in it can go stale.
@@ -75,13 +75,18 @@ READING_RECORDED = """## Reading these tables
 
 def summary_sections(frame) -> list[str]:
     """The lines of a simulated run's summary, as ``README.md`` and ``index.html`` both show it:
-    the method x condition table and its sentences, what each method did with the gear's torque
+    the headlines (claims made on one half of the devices and checked on the other,
+    :mod:`rippleb.report.claims`), the method x condition table and its sentences, what each method did with the gear's torque
     (:mod:`rippleb.report.gear_section`), the gauge layouts of a layout sweep
     (:mod:`rippleb.report.layouts_section`) and each method in plain words."""
-    parts = ["## Method x condition (mean `rms_error_nm` over the scenarios, 95 % interval)", "",
-             "Per seed (device), the mean RMS error over the scenarios every method finished under "
-             "that condition; then mean ± 95 % t-interval over seeds.", "",
-             condition_summary_markdown(frame), ""]
+    from rippleb.report.claims import split_sentence
+
+    parts = ["## Headlines", "", split_sentence(frame["seed"].unique()), ""]
+    parts += [f"- {s}" for s in headline_lines(frame)] + [""]
+    parts += ["## Method x condition (mean `rms_error_nm` over the scenarios, 95 % interval)", "",
+              "Per seed (device), the mean RMS error over the scenarios every method finished under "
+              "that condition; then mean ± 95 % t-interval over seeds.", "",
+              condition_summary_markdown(frame), "", "### Who leads under each condition", ""]
     parts += [f"- {s}" for s in condition_headline(frame)] + [""]
     return parts + gear_markdown(frame) + layouts_markdown(frame) + verdicts_section(frame)
 

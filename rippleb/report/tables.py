@@ -12,12 +12,13 @@ import textwrap
 
 import numpy as np
 
-from rippleb.report.stats import (condition_order, fmt_interval, interval_frame, method_order,
-                           ok_rows, per_seed_mean_over_scenarios, scenario_order, t_interval,
-                           with_condition)
+from rippleb.report.stats import fmt_interval, interval_frame, method_order, ok_rows, scenario_order, with_condition
 from rippleb.printable import escaped, markdown_code as md_code, markdown_text as md_text
 from rippleb.report.markdown import escape_cell, first_line, markdown, one_line, plural  # noqa: F401 - re-exported
-from rippleb.report.paired import lead_text, paired_lead
+from rippleb.report.claims import claim_family
+from rippleb.report.conditions import (by_condition, condition_claims, condition_headline,  # noqa: F401 - re-exported
+                                       condition_summary, condition_summary_markdown, conditions_of,
+                                       headline_lines)
 from rippleb.report.table_one import TABLE_I_METHODS, TABLE_I_SCENARIO
 
 #: Columns of the accuracy matrices: (title, unit).
@@ -53,20 +54,6 @@ NOISY_SPREAD = 0.5
 #: ... or when the tail is this many times the median tick: a p99 far above p50 is
 #: mostly time the process spent descheduled, not the method's work.
 NOISY_TAIL = 20.0
-
-
-# --------------------------------------------------------------------------- helpers
-
-def conditions_of(frame) -> list[str]:
-    """The conditions of ``frame``'s rows in :func:`~rippleb.report.stats.condition_order`."""
-    return condition_order(with_condition(frame)["condition"].unique())
-
-
-def by_condition(frame):
-    """``(condition, rows)`` per condition of ``frame``, in condition order."""
-    frame = with_condition(frame)
-    for condition in conditions_of(frame):
-        yield condition, frame[frame["condition"] == condition]
 
 
 # --------------------------------------------------------------------------- what the rows are
@@ -212,21 +199,32 @@ def ranking(frame, column: str = "rms_error_nm"):
 
 
 def ranking_markdown(frame, column: str = "rms_error_nm") -> str:
-    """One line per scenario: the methods best to worst, then whether the first leads the
-    second by their paired per-device difference (:mod:`rippleb.report.paired`), the
-    intervals corrected for one claim per scenario."""
+    """One line per scenario: the methods best to worst over every device, then the claim
+    that the first leads the second, made on the discovery devices and checked on the
+    replication devices (:mod:`rippleb.report.claims`, one claim per scenario)."""
     ranked = ranking(frame, column)
     if ranked.empty:
         return "(no ok rows to rank)"
-    ok = ok_rows(frame)
     scenarios = scenario_order(ranked["scenario"].unique())
+    claims = {c.key: c for c in scenario_claims(frame, column)}
     rows = []
     for scenario in scenarios:
         group = ranked[ranked["scenario"] == scenario]
         order = ", ".join(f"{md_text(r.method)} ({fmt_interval(r.mean, r.half)})" for r in group.itertuples())
-        per_seed = ok[ok["scenario"] == scenario].groupby(["method", "seed"])[column].mean()
-        rows.append([md_text(scenario), order, lead_sentence(group, per_seed, claims=len(scenarios))])
-    return markdown(rows, ["scenario", f"methods by mean {column}, best first", "lead (paired per device)"])
+        claim = claims.get(scenario)
+        lead = claim.cell() if claim else f"{md_text(group.iloc[0]['method'])} is the only method with ok rows"
+        rows.append([md_text(scenario), order, lead])
+    return markdown(rows, ["scenario", f"methods by mean {column}, best first",
+                           "lead (paired per device: made on the even seeds, checked on the odd)"])
+
+
+def scenario_claims(frame, column: str = "rms_error_nm"):
+    """One claim per scenario of ``frame`` (one condition): its two methods of lowest mean on
+    the discovery devices, one family (:func:`rippleb.report.claims.claim_family`)."""
+    ok = ok_rows(frame)
+    groups = [(scenario, f"on {md_code(scenario)}", ok[ok["scenario"] == scenario].groupby(["method", "seed"])[column].mean())
+              for scenario in scenario_order(ok["scenario"].unique())]
+    return claim_family(groups)
 
 
 def headline_sentences(frame, column: str = "rms_error_nm") -> list[str]:
@@ -246,103 +244,6 @@ def headline_sentences(frame, column: str = "rms_error_nm") -> list[str]:
         total = int((ranked["scenario"] == TABLE_I_SCENARIO).sum())
         out.append(f"The paper's method, `{TABLE_I_METHODS[1]}`, ranks {int(mine['rank'].iloc[0])} of "
                    f"{total} on `{TABLE_I_SCENARIO}` by `{column}`.")
-    return out
-
-
-def lead_sentence(group, per_seed, claims: int = 1) -> str:
-    """Whether the first of ``group`` (sorted rows with ``method, mean``) leads the second,
-    by the paired difference of ``per_seed`` (a Series indexed by method and seed); Markdown."""
-    first = group.iloc[0]["method"]
-    if len(group) < 2:
-        return f"{md_text(first)} is the only method with ok rows"
-    second = group.iloc[1]["method"]
-    return lead_text(md_text(first), md_text(second), paired_lead(per_seed[first], per_seed[second], claims))
-
-
-# --------------------------------------------------------------------------- conditions
-
-def condition_summary(frame, column: str = "rms_error_nm"):
-    """Method x condition: per seed, the mean of ``column`` over the scenarios every method
-    finished under that condition; then mean and 95 % t-interval over seeds.
-
-    Returns
-    -------
-    pandas.DataFrame
-        Columns ``condition, method, mean, half, n, scenarios`` (the number of scenarios
-        averaged), sorted by condition then mean.
-    """
-    import pandas as pd
-
-    records = []
-    for condition, rows in by_condition(frame):
-        per_seed, common = per_seed_mean_over_scenarios(rows, column)
-        for method, group in per_seed.groupby("method"):
-            mean, half, n = t_interval(group["value"])
-            records.append({"condition": condition, "method": method, "mean": mean, "half": half,
-                            "n": n, "scenarios": len(common)})
-    table = pd.DataFrame(records, columns=["condition", "method", "mean", "half", "n", "scenarios"])
-    if table.empty:
-        return table
-    rank = {c: i for i, c in enumerate(condition_order(table["condition"].unique()))}
-    table = table.assign(_c=table["condition"].map(rank)).sort_values(["_c", "mean", "method"])
-    return table.drop(columns="_c").reset_index(drop=True)
-
-
-def condition_summary_markdown(frame, column: str = "rms_error_nm") -> str:
-    """The method x condition table: one row per method, one column per condition."""
-    table = condition_summary(frame, column)
-    if table.empty:
-        return "(no ok rows)"
-    conditions = condition_order(table["condition"].unique())
-    cells = {(r.condition, r.method): fmt_interval(r.mean, r.half) for r in table.itertuples()}
-    worst = table.dropna(subset=["mean"]).sort_values("mean").groupby("method").last()
-    rows = [[md_text(m)] + [cells.get((c, m), "n/a") for c in conditions]
-            + ([f"{fmt_interval(worst.loc[m, 'mean'], worst.loc[m, 'half'])} ({md_text(worst.loc[m, 'condition'])})"
-                if m in worst.index else "n/a"] if len(conditions) > 1 else [])
-            for m in method_order(table["method"].unique())]
-    counts = table.groupby("condition")["scenarios"].first()
-    heads = [f"{md_text(c)} ({plural(int(counts[c]), 'scenario')})" for c in conditions]
-    return markdown(rows, ["method"] + heads + (["worst case over the conditions"] if len(conditions) > 1 else []))
-
-
-def condition_headline(frame, column: str = "rms_error_nm") -> list[str]:
-    """Who has the lowest mean under which condition, by the method x condition summary,
-    whether it leads the second by their paired per-device difference (one claim per
-    condition), and whether the leader changes between conditions; every number from
-    the rows."""
-    table = condition_summary(frame, column)
-    if table.empty:
-        return []
-    out, leaders = [], {}
-    conditions = condition_order(table["condition"].unique())
-    for condition in conditions:
-        group = table[table["condition"] == condition].dropna(subset=["mean"])
-        if group.empty:
-            continue
-        first = group.iloc[0]
-        leaders[condition] = first["method"]
-        scen = plural(int(first["scenarios"]), "scenario")
-        text = (f"Under {md_code(condition)}, {md_code(first['method'])} has the lowest mean `{column}` over the "
-                f"{scen} every method finished ({fmt_interval(first['mean'], first['half'])})")
-        if len(group) > 1:
-            second = group.iloc[1]
-            rows = with_condition(frame)
-            per_seed, _ = per_seed_mean_over_scenarios(rows[rows["condition"] == condition], column)
-            per_seed = per_seed.set_index(["method", "seed"])["value"]
-            lead = paired_lead(per_seed[first["method"]], per_seed[second["method"]], claims=len(conditions))
-            verdict = {"separated": f"it leads by {lead.describe()}",
-                       "not separated": f"the two are not separated: {lead.describe()}, an interval that "
-                                        f"includes 0",
-                       "unknown": "fewer than two shared devices give no paired interval"}
-            text += (f", ahead of {md_code(second['method'])} ({fmt_interval(second['mean'], second['half'])}); "
-                     f"{verdict[lead.verdict]}")
-        out.append(text + ".")
-    if len(set(leaders.values())) > 1:
-        out.append("The lowest mean depends on the condition: " +
-                   ", ".join(f"{md_code(m)} under {md_code(c)}" for c, m in leaders.items()) + ".")
-    elif len(leaders) > 1:
-        out.append(f"{md_code(next(iter(leaders.values())))} has the lowest mean under every condition of this "
-                   f"run (where that lead is separated is said per condition above).")
     return out
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from rippleb.printable import markdown_code as code, markdown_text as text
 from rippleb.report.markdown import markdown
+from rippleb.tuning import EVERY_DEVICE, rule_of
 
 
 def tuning_markdown(tuning: dict | None, methods) -> str:
@@ -48,9 +49,11 @@ def tuning_parts(tuning: dict | None, methods) -> tuple[str, str]:
         if not isinstance(entry.get("evaluations", 0), (int, float)) or entry.get("evaluations", 0) <= 1:
             verdict = text(entry.get("note") or "nothing to tune")
         elif entry.get("replaced"):
-            verdict = "the best point replaced the default"
+            verdict = ("the best point replaced the default" if entry.get("adopted") == (entry.get("best") or entry.get("adopted"))
+                       else "a point that passed the paired test replaced the default")
         else:
-            verdict = "default kept (no point better on every device)"
+            verdict = ("default kept (no point better on every device)" if rule_of(tuning) == EVERY_DEVICE
+                       else "default kept (no point beat it by the paired test)")
         rows.append([code(name), verdict, adopted, _nm(entry.get("default_score")), _nm(entry.get("best_score"))])
     return intro, markdown(rows, ["method", "tuning", "values used", "score at the former default [Nm]",
                                   "best point's score [Nm]"])

@@ -28,7 +28,8 @@ from rippleb.scoring.metrics import METRIC_COLUMNS
 from rippleb.scoring.truthfree import TRUTH_FREE_COLUMNS
 from rippleb.engine.results import RunWarning, copy_rows, row_key, swept_columns
 from rippleb.engine.sealing import sealed_text
-from rippleb.report.sections import READING_RECORDED, READING_SIMULATED, conditions_note, summary_sections
+from rippleb.report.publication import SALT_NAME, compare_rows, read_results_exact  # noqa: F401 - re-exported
+from rippleb.report.sections import READING_RECORDED, READING_SIMULATED, conditions_note, summary_sections  # noqa: F401
 from rippleb.report.tuning_table import tuning_markdown
 from rippleb.report.stats import (CONFIDENCE, METHOD_ORDER, fmt_interval, interval_frame,  # noqa: F401
                                   method_order, scenario_order, t_interval, with_condition)
@@ -37,7 +38,7 @@ from rippleb.report.table_one import (PAPER_CITATION, PAPER_TABLE_I, TABLE_I_MET
 from rippleb.report.tables import (ACCURACY_COLUMNS, MATRIX_COLUMNS, by_condition,  # noqa: F401
                                    counts_sentence, is_recorded, title_lines,
                                    condition_headline, condition_summary, condition_summary_markdown,
-                                   failed_markdown, headline_sentences, matrix_markdown, plural,
+                                   failed_markdown, headline_lines, headline_sentences, matrix_markdown, plural,
                                    ranking, ranking_markdown, summary_text, timing_markdown, timing_note)
 
 def load_rows(run_dir):
@@ -126,62 +127,27 @@ def _condition_section(condition: str, rows, source: str) -> list[str]:
     return parts
 
 
-def read_results_exact(path):
-    """A results CSV with every float parsed back to the exact double that was written.
-
-    pandas >= 3 parses with round-trip precision by default (and deprecates the option);
-    older pandas needs ``float_precision="round_trip"``, its default may differ in the last bit.
-    """
-    import pandas as pd
-
-    if int(pd.__version__.split(".")[0]) >= 3:
-        return pd.read_csv(path)
-    return pd.read_csv(path, float_precision="round_trip")
+def load_sweep(path):
+    """The rows of a sweep for "Where each conclusion holds" (``--sweep``): a run directory
+    of ``rippleb sweep`` or a report written from one; one line when it holds no swept column."""
+    rows = load_rows(path)
+    if not swept_columns(rows.columns):
+        raise InputError(f"--sweep {path}: no swept parameter in its rows (a 'rippleb sweep' run, or its report, "
+                         f"is what --sweep reads)")
+    return rows
 
 
-def compare_rows(published, fresh, columns=ACCURACY_COLUMNS, rtol: dict | None = None) -> list[str]:
-    """Differences between the rows of ``fresh`` and the same (method, scenario,
-    [condition,] seed) rows of ``published``, in ``columns``, compared exactly (NaN equals
-    NaN), or where ``rtol`` names a column's relative tolerance, within it.
+def holds_markdown(frame, sweeps) -> str:
+    """The section "Where each conclusion holds" of ``frame``'s report over ``sweeps``
+    (``[(name, rows)]``), as the README prints it: a pure function of the rows, so
+    ``tests/test_published.py`` regenerates it."""
+    from rippleb.report.holds import blocks_markdown, holds_blocks
 
-    Returns one line per missing row or differing value; empty when they agree.
-    """
-    rtol = rtol or {}
-    published, fresh = with_condition(published), with_condition(fresh)
-    keys = ["method", "scenario", "condition", "seed"]
-    pub = published.set_index(keys)
-    problems = []
-    for row in fresh.itertuples(index=False):
-        row = row._asdict()
-        key = tuple(row[k] for k in keys)
-        if key not in pub.index:
-            problems.append(f"{key}: not in the published rows")
-            continue
-        old = pub.loc[key]
-        for col in ("status",) + tuple(columns):
-            a, b = old[col], row[col]
-            if not _same(a, b, rtol.get(col)):
-                within = f" (beyond the relative tolerance {rtol[col]:g})" if col in rtol else ""
-                problems.append(f"{key} {col}: published {_plain(a)!r}, re-run {_plain(b)!r}{within}")
-    return problems
-
-
-def _same(a, b, rtol: float | None) -> bool:
-    both_float = isinstance(a, float) and isinstance(b, float)
-    if both_float and np.isnan(a) and np.isnan(b):
-        return True
-    if rtol is not None and both_float:
-        return abs(a - b) <= rtol * abs(a)
-    return a == b
-
-
-def _plain(value):
-    """A numpy scalar as the Python number it holds, so messages show ``0.1``, not ``np.float64(0.1)``."""
-    return value.item() if isinstance(value, np.generic) else value
+    return blocks_markdown(holds_blocks(frame, sweeps))
 
 
 def readme_markdown(frame, prov: dict, figures: dict, *, published: bool = False,
-                    run_dir: str = "DIR") -> str:
+                    run_dir: str = "DIR", sweeps=()) -> str:
     """``README.md`` of a report: every number from ``frame`` or ``prov``.
 
     ``published`` is True only for the comparison in the repository's ``results/``
@@ -196,6 +162,8 @@ def readme_markdown(frame, prov: dict, figures: dict, *, published: bool = False
         parts += ["", prov.get("sealed") or sealed_text(frame, prov.get("run", {}))]
     parts += ["", READING_RECORDED if recorded else READING_SIMULATED]
     parts += ["", tables_markdown(frame, prov.get("run", {}).get("joint"))]
+    if sweeps and not recorded:
+        parts += ["", holds_markdown(frame, sweeps)]
     if not recorded:
         parts += ["", "## How each method was tuned", "",
                   tuning_markdown(prov.get("run", {}).get("tuning"), method_order(frame["method"]))]
@@ -211,7 +179,7 @@ def readme_markdown(frame, prov: dict, figures: dict, *, published: bool = False
 
 def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, argv=None,
            published: bool = False, html: bool = False, figure_format: str = "png",
-           speed_seeds: int | None = None) -> dict:
+           speed_seeds: int | None = None, salt_file=None, sweeps=()) -> dict:
     """Write the report of ``run_dir`` into ``out`` (default ``run_dir/report``).
 
     Parameters
@@ -235,6 +203,14 @@ def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, arg
     speed_seeds
         The error-against-speed figure averages the first ``speed_seeds`` seeds of the run
         (default: all of them; each is re-simulated and re-streamed).
+    salt_file
+        The salt of a sealed run (the file ``rippleb run --sealed`` wrote), to publish beside
+        the report as ``OUT/salt.txt`` once checked against the run's commitment
+        (:mod:`rippleb.report.publication`); ``out`` must then lie outside ``run_dir``.
+    sweeps
+        Directories of sweep rows (``rippleb sweep`` runs, or the reports written from
+        them) on which the report's conclusions are re-evaluated: the section "Where each
+        conclusion holds" (:mod:`rippleb.report.holds`).
 
     Returns
     -------
@@ -247,18 +223,26 @@ def report(run_dir, out=None, *, figures: bool = True, figure_seed: int = 0, arg
     if out is None:   # the run directory's own entry: never a link (one to elsewhere would take the report there)
         refuse_links(run_dir, ["report"])
     out = Path(out) if out is not None else run_dir / "report"
+    salt = None
+    if salt_file is not None:
+        from rippleb.engine.sealing import published_salt
+        from rippleb.report.publication import check_salt_destination
+
+        check_salt_destination(run_dir, out)
+        salt = published_salt(read_run_provenance(run_dir), salt_file)
+    swept = [(str(path), load_sweep(path)) for path in sweeps]
     _mkdir(out)
     refuse_links(out, REPORT_ENTRIES, also_in="figures")
     try:
         return _write_report(run_dir, out, frame, figures=figures, figure_seed=figure_seed, argv=argv,
                              published=published, html=html, figure_format=figure_format,
-                             speed_seeds=speed_seeds)
+                             speed_seeds=speed_seeds, salt=salt, sweeps=swept)
     except OSError as exc:  # a full disk or a quota while writing figures: one line, not a traceback
         raise InputError(f"{exc.filename or out}: cannot write the report: {exc.strerror or exc}") from None
 
 
 def _write_report(run_dir: Path, out: Path, frame, *, figures, figure_seed, argv, published, html,
-                  figure_format, speed_seeds) -> dict:
+                  figure_format, speed_seeds, salt=None, sweeps=()) -> dict:
     prov = {"run": read_run_provenance(run_dir), "report": collect_provenance(argv),
             "published": published, "seeds": sorted(int(s) for s in frame["seed"].unique()),
             "seeds_text": seeds_text(frame["seed"].unique()), "rows": len(frame),
@@ -267,7 +251,13 @@ def _write_report(run_dir: Path, out: Path, frame, *, figures, figure_seed, argv
         values = sorted(str(v) for v in frame[col].dropna().unique()) if col in frame else []
         prov[f"rows_{col}"] = ", ".join(values) or "not recorded"
     prov["run_dir"] = str(run_dir)
+    prov["sweeps"] = [{"dir": name, "rows": len(rows)} for name, rows in sweeps]
     prov["sealed"] = sealed_text(frame, prov["run"])
+    if salt is not None:
+        from rippleb.report.publication import verify_text, write_salt
+
+        prov["salt"] = write_salt(out, salt)
+        prov["sealed"] += " " + verify_text(prov["salt"])
     drawn, warnings, signals = {}, environment_warnings(frame, prov["run"]), {}
     if prov["sealed"].startswith("Partly"):
         warnings.append(prov["sealed"])
@@ -292,19 +282,20 @@ def _write_report(run_dir: Path, out: Path, frame, *, figures, figure_seed, argv
     with atomic_path(out / "results.csv") as tmp:
         copy_rows(run_dir / "results.csv", tmp, {row_key(r) for r in frame.to_dict("records")})
     _write(out / "provenance.json", json.dumps(prov, indent=1, default=str) + "\n")
-    _write(out / "README.md", readme_markdown(frame, prov, drawn, published=published, run_dir=str(run_dir)))
+    _write(out / "README.md", readme_markdown(frame, prov, drawn, published=published, run_dir=str(run_dir),
+                                              sweeps=sweeps))
     page = None
     if html:
         from rippleb.report.html_report import write_html
 
         page = write_html(frame, prov, out / "index.html", figure_seed=figure_seed if figures else None,
-                          signals=signals)
+                          signals=signals, sweeps=sweeps)
     return {"readme": out / "README.md", "csv": out / "results.csv", "provenance": out / "provenance.json",
             "html": page, "figures": {k: v[0] for k, v in drawn.items()}, "warnings": warnings}
 
 
 #: What ``rippleb report`` writes in its directory; none may be a symbolic link (nor anything in figures/).
-REPORT_ENTRIES = ("README.md", "results.csv", "provenance.json", "index.html", "figures")
+REPORT_ENTRIES = ("README.md", "results.csv", "provenance.json", "index.html", SALT_NAME, "figures")
 
 
 def _mkdir(path: Path) -> None:

@@ -222,7 +222,7 @@ FORMATS = ("png", "svg", "pdf")
 
 
 def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
-             keep: dict | None = None) -> tuple[dict, list]:
+             keep: dict | None = None, sealed: bool = False) -> tuple[dict, list]:
     """Every figure the run allows, into ``out_dir``, as ``fmt`` (png, svg or pdf).
 
     Signal figures use the run's methods with at least one ok row of the ``same-session``
@@ -230,6 +230,8 @@ def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
     re-simulated on ``seed``; the error-against-speed figure repeats that on every seed of
     ``speed_seeds`` (default: every seed of the run) to show the mean over devices.
     ``keep``, if given, receives the signals of ``seed`` per scenario (for the HTML page).
+    ``sealed``: the rows are a sealed run's, whose devices are secret; the figures then
+    re-simulate the public devices of the same numbers, and their captions say so.
 
     Returns
     -------
@@ -252,11 +254,14 @@ def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
     out_dir.mkdir(parents=True, exist_ok=True)
     path = lambda name: out_dir / f"{name}.{fmt}"  # noqa: E731
     figures, warnings = {}, []
+    device = f"public seed {seed}, not a sealed device" if sealed else f"seed {seed}"
     figures["fig2_order_spectra"] = (plot_order_spectra(path("fig2_order_spectra"), seed=seed),
-                                     f"Strain spectra over time and over angle (Fig. 2 replica, seed {seed})")
+                                     f"Strain spectra over time and over angle (Fig. 2 replica, {device})")
     if not is_recorded(frame):   # simulated devices: the run's own, re-simulated
         population_seeds = sorted(int(k) for k in (frame["seed"].unique() if speed_seeds is None else speed_seeds))
         devices = seeds_text(population_seeds).replace("(", "devices (")
+        if sealed:   # the sealed devices are secret: the figure shows the public ones of those numbers
+            devices = f"public {devices}, not the sealed run's"
         cases = order_figure.population(population_seeds)
         figures["fig2_orders_vs_speed"] = (
             order_figure.plot_orders_vs_speed(cases, path("fig2_orders_vs_speed"), devices),
@@ -272,8 +277,9 @@ def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
     if methods and scenarios:
         signals, more = _signals_of_seed(methods, scenarios, seed)
         warnings += more
-        # a sweep's rows ran at swept values, not the built-in scenario re-simulated here
-        if not swept_columns(frame.columns):
+        # a sweep's rows ran at swept values, and a sealed run's on secret devices, not the
+        # public device re-simulated here: nothing to check the figure against
+        if not swept_columns(frame.columns) and not sealed:
             for scenario in scenarios:
                 warnings += _check_against_rows(signals[scenario], ok, scenario, seed)
         if keep is not None:
@@ -284,10 +290,10 @@ def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
                                       "Trajectory of paper-quintic (Fig. 4 replica)")
         figures["fig5_ripple_compensation"] = (
             plot_ripple_compensation(sig, path("fig5_ripple_compensation"), seed),
-            f"Raw against order-tracking filtered torque on paper-quintic (Fig. 5 replica, seed {seed})")
+            f"Raw against order-tracking filtered torque on paper-quintic (Fig. 5 replica, {device})")
         figures["fig6_estimates"] = (
             plot_estimates(sig, path("fig6_estimates"), seed),
-            f"Each estimate against the model reference on paper-quintic (Fig. 6 replica, seed {seed})")
+            f"Each estimate against the model reference on paper-quintic (Fig. 6 replica, {device})")
     if signals:
         seeds = sorted(int(k) for k in (ok["seed"].unique() if speed_seeds is None else speed_seeds))
         edges = speed_edges(list(signals.values()))
@@ -296,6 +302,7 @@ def draw_all(frame, out_dir, seed: int = 0, fmt: str = "png", speed_seeds=None,
             more_signals, _ = _signals_of_seed(methods, scenarios, other)
             tables.append(error_by_speed(list(more_signals.values()), edges=edges))
         text = seeds_text(sorted(set(seeds) | {seed})).replace("(", "devices (")
+        text = f"public {text}, not the sealed run's" if sealed else text
         figures["error_vs_speed"] = (
             plot_error_vs_speed(error_by_speed_over_seeds(tables), path("error_vs_speed"), text, scenarios),
             f"RMS error against joint speed per method, mean over {text}")

@@ -273,7 +273,7 @@ def _write_report(run_dir: Path, out: Path, frame, *, figures, figure_seed, argv
         seeds = sorted(int(s) for s in frame["seed"].unique())
         drawn, figure_warnings = figs.draw_all(frame, out / "figures", seed=figure_seed, fmt=figure_format,
                                         speed_seeds=seeds[:speed_seeds] if speed_seeds else seeds,
-                                        keep=signals)
+                                        keep=signals, sealed=not prov["sealed"].startswith("Not sealed"))
         warnings += figure_warnings
     prov["figure_seed"] = figure_seed if figures else None
     # A byte copy, not a rewrite: re-printing parsed floats could change their last digit,

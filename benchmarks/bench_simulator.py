@@ -18,7 +18,7 @@ from scipy import signal
 
 from rippleb import builtin_scenarios, load_scenario, simulate
 from rippleb.simulator import robot
-from rippleb.scenario import scenario_from_dict
+from rippleb.simulator.scenario import scenario_from_dict
 
 
 def _lfilter_seconds(n: int, fs: float) -> float:

@@ -27,7 +27,7 @@ from pathlib import Path
 import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from test_bad_input import GOOD, PLUGIN, _dist  # noqa: E402
+from support import GOOD, PLUGIN, install_dist as _dist  # noqa: E402
 from test_sealing import RESIMULATOR  # noqa: E402
 
 RUN = ["run", "--seeds", "1", "--jobs", "2", "--no-progress"]

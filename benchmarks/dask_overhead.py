@@ -16,7 +16,7 @@ from distributed import Client, LocalCluster
 from rippleb.engine.dask import executor as dask_executor
 from rippleb.engine.executors import RowTask
 from rippleb.engine.rows import RowKey
-from rippleb.scenario import load_scenario
+from rippleb.simulator.scenario import load_scenario
 
 
 def _noop(task, blas):

@@ -22,9 +22,9 @@ import dataclasses
 
 import numpy as np
 
-from rippleb.mismatch import KNOB_BY_NAME
+from rippleb.simulator.mismatch import KNOB_BY_NAME
 from rippleb.report.order_figure import fraction_sentence
-from rippleb.scenario import load_scenario
+from rippleb.simulator.scenario import load_scenario
 from rippleb.simulator import simulate, spectrum
 
 
@@ -53,7 +53,7 @@ def main(argv=None) -> None:
     parser.add_argument("--condition", default="same-session")
     parser.add_argument("--order2-share", type=float, default=None)
     parser.add_argument("--gear", action="append", default=[], metavar="KNOB=VALUE",
-                        help="a [gear] knob of rippleb.mismatch, e.g. compliance_variation=0.02")
+                        help="a [gear] knob of rippleb.simulator.mismatch, e.g. compliance_variation=0.02")
     args = parser.parse_args(argv)
     lo, hi = (int(x) for x in args.seeds.split("-"))
     gear = {k: float(v) for k, v in (item.split("=") for item in args.gear)}

@@ -18,7 +18,7 @@ from rippleb.dsp import encoder_angle, fit_gain_offset
 from rippleb.layouts import GaugeSettings
 from rippleb.methods import gain_tuned
 from rippleb.methods.gear_aware import gear_rows, smooth
-from rippleb.scenario import load_scenario
+from rippleb.simulator.scenario import load_scenario
 from rippleb.simulator import simulate
 
 SLOW_RAD_S = 12.0

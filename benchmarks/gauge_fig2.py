@@ -26,7 +26,7 @@ import numpy as np
 
 from rippleb.dsp import encoder_angle
 from rippleb.layouts import GaugeSettings
-from rippleb.scenario import scenario_from_dict
+from rippleb.simulator.scenario import scenario_from_dict
 from rippleb.simulator import simulate
 
 SEEDS_FROM = 2000

@@ -36,7 +36,7 @@ def calibration_gear_torque(seed: int):
     """The calibration log of device ``seed`` and its gear torque [Nm] per sample: the
     calibration scenario simulated as if scored (the same log: its noise is drawn from the
     seed and the scenario's name), for which the simulator keeps ``torque_gear``."""
-    from rippleb.scenario import load_scenario
+    from rippleb.simulator.scenario import load_scenario
     from rippleb.simulator import simulate
 
     sim = simulate(dataclasses.replace(load_scenario("calibration"), scored=True), seed)

@@ -26,7 +26,8 @@ import numpy as np
 import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from test_integrity import HOSTILE, NAPPER, SLOW_IMPORT, _dist, nap, napping  # noqa: E402
+from test_integrity import HOSTILE, SLOW_IMPORT  # noqa: E402
+from support import NAPPER, install_dist as _dist, nap, napping  # noqa: E402
 from test_integrity_inputs import SCENARIO  # noqa: E402
 
 RUN = ["run", "--seeds", "1", "--jobs", "2", "--no-progress"]

@@ -20,7 +20,7 @@ import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from test_bad_input import _dist  # noqa: E402
+from support import install_dist as _dist  # noqa: E402
 from test_plumbing import PROBER  # noqa: E402
 from test_row_integrity import _rows, _write_rows  # noqa: E402
 

@@ -24,7 +24,7 @@ import numpy as np
 
 def cases(seeds: int, sweep_seeds: int):
     """``(label, scenario, seed, condition)`` of every published case."""
-    from rippleb.scenario import load_scenario, scored_scenarios
+    from rippleb.simulator.scenario import load_scenario, scored_scenarios
     from rippleb.simulator.conditions import CONDITIONS
     from rippleb.engine.sweep import swept_scenario
 

@@ -24,7 +24,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 import rippleb  # noqa: E402,F401 - before numpy: the portable numeric paths
 
-from test_walls import METHODS, PROBER, Listener, _cli, _dist, _label, _probe, _rows  # noqa: E402
+from test_walls import METHODS, PROBER, Listener, _cli, _label, _probe, _rows  # noqa: E402
+from support import install_dist as _dist  # noqa: E402
 
 RUN = ("--scenarios", "static-contact", "--seeds", "1", "--no-progress")
 
@@ -67,7 +68,7 @@ def case_local(where: Path, site: Path, executor: str = "local") -> tuple[str, i
 def case_scheduler(where: Path, site: Path) -> tuple[str, int, str]:
     import os
 
-    from test_dask import Cluster
+    from support import Cluster
 
     os.environ["PYTHONPATH"] = os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")])
     cluster = Cluster(where, n=2)

@@ -67,10 +67,10 @@ _EXPORTS = {
     "Method": "rippleb.method",
     "run": "rippleb.engine.runner",
     "run_log": "rippleb.engine.runner",
-    "Scenario": "rippleb.scenario",
-    "builtin_scenarios": "rippleb.scenario",
-    "load_scenario": "rippleb.scenario",
-    "scored_scenarios": "rippleb.scenario",
+    "Scenario": "rippleb.simulator.scenario",
+    "builtin_scenarios": "rippleb.simulator.scenario",
+    "load_scenario": "rippleb.simulator.scenario",
+    "scored_scenarios": "rippleb.simulator.scenario",
     "Simulation": "rippleb.simulator",
     "simulate": "rippleb.simulator",
     "run_sweep": "rippleb.engine.sweep",
@@ -83,7 +83,7 @@ if TYPE_CHECKING:  # what static tools see: the same names, imported eagerly
     from rippleb.errors import InputError, PluginError, RipplebError
     from rippleb.method import Method
     from rippleb.engine.runner import run, run_log
-    from rippleb.scenario import Scenario, builtin_scenarios, load_scenario, scored_scenarios
+    from rippleb.simulator.scenario import Scenario, builtin_scenarios, load_scenario, scored_scenarios
     from rippleb.simulator import Simulation, simulate
     from rippleb.engine.sweep import run_sweep
 

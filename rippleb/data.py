@@ -44,7 +44,7 @@ SMALLEST_NORMAL = float(np.finfo(float).tiny)
 #: (:mod:`rippleb.scoring.scorable`).
 MAX_TORQUE_FACTOR = 10.0
 #: Most samples a recorded log may hold: 20 million, 1000 s at 20 kHz, twice the longest
-#: simulated scenario (:data:`rippleb.scenario.MAX_SAMPLES`); more is read no further.
+#: simulated scenario (:data:`rippleb.simulator.scenario.MAX_SAMPLES`); more is read no further.
 MAX_LOG_SAMPLES = 20_000_000
 
 

@@ -20,24 +20,7 @@ import pandas as pd
 import pytest
 
 from rippleb import InputError, load_scenario, read_log
-
-GOOD = textwrap.dedent("""\
-    [robot]
-    posture = { elbow_joint = 1.5 }
-    [trajectory]
-    start = -1.8
-    [[trajectory.segment]]
-    kind = "move"
-    by = 0.1
-    duration = 0.2
-    """)
-
-
-def _log_frame(n=200, fs=20_000.0):
-    t = np.arange(n) / fs
-    return pd.DataFrame({"t": t, "strain": 0.1 * np.sin(t), "encoder": np.arange(n) // 3,
-                         "current": np.cos(t), "torque_ref": np.sin(t)})
-
+from support import GOOD, PLUGIN, install_dist, log_frame
 
 class _Payload:
     """Unpickling this creates a file: proof that a reader executed code."""
@@ -47,20 +30,6 @@ class _Payload:
 
     def __reduce__(self):
         return (open, (self.marker, "w"))
-
-
-def _dist(site: Path, dist: str, module: str, source: str, entry_points: dict[str, str]):
-    """A minimal installed distribution (dist-info with entry points) without pip."""
-    info = site / f"{dist.replace('-', '_')}-0.1.dist-info"
-    info.mkdir(parents=True)
-    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text(
-        "[rippleb.methods]\n" + "".join(f"{k} = {module}:{v}\n" for k, v in entry_points.items()))
-    (site / f"{module}.py").write_text(source)
-
-
-PLUGIN = "from rippleb import Method\nclass Plugin(Method):\n    name = 'x'\n" \
-         "    def step(self, block):\n        return block.strain * 10.0\n"
 
 
 def _setup(root: Path) -> dict:
@@ -76,7 +45,7 @@ def _setup(root: Path) -> dict:
         "[robot]\n", "") + "[trajectory]" + GOOD.split("[trajectory]")[1])
     (root / "joint.toml").write_text(GOOD.replace("[robot]\n", '[robot]\njoint = "knee"\n'))
     (root / "binary.toml").write_bytes(b"\xff\xfe\x00bad")
-    frame = _log_frame()
+    frame = log_frame()
     (root / "empty.csv").write_text("")
     frame.iloc[:0].to_csv(root / "header-only.csv", index=False)
     frame.drop(columns="current").to_csv(root / "no-current.csv", index=False)
@@ -99,10 +68,10 @@ def _setup(root: Path) -> dict:
     (root / "pickle.csv").write_bytes(pickle.dumps(_Payload(root / "PWNED")))
     (root / "a-file").write_text("I am a regular file")
     frame.to_csv(root / "good.csv", index=False)
-    _dist(root / "site-dup", "rippleb-dup-a", "dup_a", PLUGIN, {"dup": "Plugin"})
-    _dist(root / "site-dup", "rippleb-dup-b", "dup_b", PLUGIN, {"dup": "Plugin"})
-    _dist(root / "site-clash", "rippleb-clash", "clash", PLUGIN, {"raw": "Plugin"})
-    _dist(root / "site-broken", "rippleb-broken", "broken_mod", "import no_such_module_xyz\n",
+    install_dist(root / "site-dup", "rippleb-dup-a", "dup_a", PLUGIN, {"dup": "Plugin"})
+    install_dist(root / "site-dup", "rippleb-dup-b", "dup_b", PLUGIN, {"dup": "Plugin"})
+    install_dist(root / "site-clash", "rippleb-clash", "clash", PLUGIN, {"raw": "Plugin"})
+    install_dist(root / "site-broken", "rippleb-broken", "broken_mod", "import no_such_module_xyz\n",
           {"broken-one": "Plugin"})
     run = ["run", "--seeds", "1", "--jobs", "1", "--no-progress", "--methods", "raw"]
     out = ["--out", "out"]
@@ -304,7 +273,7 @@ def test_names_cannot_make_the_runner_write_outside_out(tmp_path):
     A plugin named ``../../escape`` is refused at discovery (issue 25: a method name is an
     identifier with dashes), before anything is written."""
     site = tmp_path / "site"
-    _dist(site, "rippleb-escape", "escape_mod", PLUGIN, {"../../escape": "Plugin"})
+    install_dist(site, "rippleb-escape", "escape_mod", PLUGIN, {"../../escape": "Plugin"})
     work = tmp_path / "work"
     work.mkdir()
     (work / "..x.toml").write_text(GOOD)

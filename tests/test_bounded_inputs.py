@@ -21,8 +21,8 @@ from hypothesis import given, strategies as st
 import rippleb  # noqa: F401 - before numpy: the portable numeric paths
 from rippleb.cli import main
 from rippleb.printable import CSV_ACTIVE, csv_read, csv_text
-from test_bad_input import GOOD, _log_frame
-from test_checked_input import _one_error
+from support import GOOD, log_frame
+from support import one_error
 
 
 # --------------------------------------------------------------------------- run directories
@@ -59,7 +59,7 @@ def test_a_run_json_that_links_elsewhere_is_not_followed(tmp_path, capsys):
     run = _run_dir(tmp_path)
     os.symlink(elsewhere, run / "run.json")
     assert main(["run", "--resume", str(run), "--no-progress"]) == 2
-    _one_error(capsys, f"{run}/run.json", "a symbolic link")
+    one_error(capsys, f"{run}/run.json", "a symbolic link")
 
 
 def test_a_results_file_over_its_cap_is_refused_before_it_is_read(tmp_path, monkeypatch, capsys):
@@ -68,14 +68,14 @@ def test_a_results_file_over_its_cap_is_refused_before_it_is_read(tmp_path, monk
     run = _run_dir(tmp_path, results_csv="method,scenario,seed,status\n" + "x,y,0,ok\n" * 100)
     monkeypatch.setattr(reading, "RESULTS_BYTES", 64)
     assert main(["report", str(run)]) == 2
-    _one_error(capsys, "results.csv", "more than the 64 bytes a results file may have")
+    one_error(capsys, "results.csv", "more than the 64 bytes a results file may have")
 
 
 @pytest.mark.parametrize("depth", [40, 100_000])
 def test_a_deeply_nested_run_json_is_one_line(tmp_path, capsys, depth):
     run = _run_dir(tmp_path, run_json='{"methods": ' + "[" * depth + "]" * depth + "}")
     assert main(["run", "--resume", str(run), "--no-progress"]) == 2
-    _one_error(capsys, "run.json", "nested more than 32 levels")
+    one_error(capsys, "run.json", "nested more than 32 levels")
 
 
 def test_a_report_into_a_directory_of_links_writes_nothing_through_them(tmp_path, capsys):
@@ -94,15 +94,15 @@ def test_a_report_into_a_directory_of_links_writes_nothing_through_them(tmp_path
         report.mkdir()
         os.symlink(outside / name, report / name)
         assert main(["report", str(run), "--out", str(report)]) == 2
-        _one_error(capsys, f"{report / name}: a symbolic link")
+        one_error(capsys, f"{report / name}: a symbolic link")
     inner = tmp_path / "report-inner"
     (inner / "figures").mkdir(parents=True)
     os.symlink(outside / "x.png", inner / "figures" / "rows.png")   # a link inside figures/
     assert main(["report", str(run), "--out", str(inner)]) == 2
-    _one_error(capsys, f"{inner / 'figures' / 'rows.png'}: a symbolic link")
+    one_error(capsys, f"{inner / 'figures' / 'rows.png'}: a symbolic link")
     os.symlink(outside, run / "report")   # the run's own report entry, a link to elsewhere
     assert main(["report", str(run)]) == 2
-    _one_error(capsys, f"{run / 'report'}: a symbolic link")
+    one_error(capsys, f"{run / 'report'}: a symbolic link")
     assert not list(outside.iterdir())   # nothing written there
 
 
@@ -126,14 +126,14 @@ def _bounded(target, seconds: float = 60.0):
 
 def test_a_fifo_as_joint_file_scenario_or_log_is_one_line_not_a_hang(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
-    _log_frame(n=8000).to_csv("rec.csv", index=False)
+    log_frame(n=8000).to_csv("rec.csv", index=False)
     cases = [(["run", "--log", "rec.csv", "--joint", _fifo(tmp_path / "joint.toml"), "--out", "o"], "joint.toml"),
              (["run", "--methods", "raw", "--scenarios", _fifo(tmp_path / "s.toml"), "--out", "o"], "s.toml"),
              (["run", "--log", _fifo(tmp_path / "fifo.csv"), "--out", "o"], "fifo.csv"),
              (["simulate", _fifo(tmp_path / "t.toml"), "--out", "x.csv"], "t.toml")]
     for argv, name in cases:
         assert _bounded(lambda: main(argv)) == 2
-        _one_error(capsys, name, "a FIFO (named pipe), not a regular file")
+        one_error(capsys, name, "a FIFO (named pipe), not a regular file")
     assert not (tmp_path / "o").exists() and not (tmp_path / "x.csv").exists()
 
 
@@ -143,9 +143,9 @@ def test_a_log_or_scenario_that_names_a_device_is_one_line(tmp_path, monkeypatch
     os.symlink(device, tmp_path / "dev.toml")
     os.symlink(device, tmp_path / "dev.csv")
     assert main(["run", "--methods", "raw", "--scenarios", "dev.toml", "--out", "o"]) == 2
-    _one_error(capsys, "dev.toml", "a character device")
+    one_error(capsys, "dev.toml", "a character device")
     assert main(["run", "--log", "dev.csv", "--out", "o"]) == 2
-    _one_error(capsys, "dev.csv", "a character device")
+    one_error(capsys, "dev.csv", "a character device")
 
 
 @pytest.mark.parametrize("kind, text, words", [
@@ -156,14 +156,14 @@ def test_a_log_or_scenario_that_names_a_device_is_one_line(tmp_path, monkeypatch
 def test_a_joint_file_nested_too_deep_or_with_a_giant_integer_is_one_line(tmp_path, monkeypatch, capsys,
                                                                             kind, text, words):
     monkeypatch.chdir(tmp_path)
-    _log_frame(n=8000).to_csv("rec.csv", index=False)
+    log_frame(n=8000).to_csv("rec.csv", index=False)
     (tmp_path / "joint.toml").write_text(text)
     (tmp_path / "deep.toml").write_text(text.replace("[joint]\ncounts_per_rev", "duration").replace(
         "[joint]\ncolumns", "duration") + GOOD)
     assert main(["run", "--log", "rec.csv", "--joint", "joint.toml", "--out", "o"]) == 2
-    _one_error(capsys, "joint.toml", *words)
+    one_error(capsys, "joint.toml", *words)
     assert main(["run", "--methods", "raw", "--scenarios", "deep.toml", "--out", "o"]) == 2
-    _one_error(capsys, "deep.toml", *words)
+    one_error(capsys, "deep.toml", *words)
     assert not (tmp_path / "o").exists()
 
 
@@ -175,23 +175,23 @@ def test_absurd_joint_values_are_refused_in_a_joint_file_and_a_scenario(tmp_path
     from rippleb.reading import JOINT_RANGES
 
     monkeypatch.chdir(tmp_path)
-    _log_frame(n=8000).to_csv("rec.csv", index=False)
+    log_frame(n=8000).to_csv("rec.csv", index=False)
     (tmp_path / "joint.toml").write_text(f"[joint]\n{key} = {value}\n")
     (tmp_path / "s.toml").write_text(f"[joint]\n{key} = {value}\n" + GOOD)
     low, high = JOINT_RANGES[key]
     assert main(["run", "--log", "rec.csv", "--joint", "joint.toml", "--out", "o"]) == 2
-    _one_error(capsys, "joint.toml", f"joint.{key}", f"[{low:g}, {high:g}]")
+    one_error(capsys, "joint.toml", f"joint.{key}", f"[{low:g}, {high:g}]")
     assert main(["run", "--methods", "raw", "--scenarios", "s.toml", "--out", "o"]) == 2
-    _one_error(capsys, "s.toml", f"joint.{key}", f"[{low:g}, {high:g}]")
+    one_error(capsys, "s.toml", f"joint.{key}", f"[{low:g}, {high:g}]")
     assert not (tmp_path / "o").exists()
 
 
 def test_a_log_column_mapped_twice_is_refused(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
-    _log_frame(n=8000).to_csv("rec.csv", index=False)
+    log_frame(n=8000).to_csv("rec.csv", index=False)
     (tmp_path / "joint.toml").write_text('[joint.columns]\nstrain = "strain"\ncurrent = "strain"\n')
     assert main(["run", "--log", "rec.csv", "--joint", "joint.toml", "--out", "o"]) == 2
-    _one_error(capsys, "joint.toml", "strain and current both map the log's column 'strain'")
+    one_error(capsys, "joint.toml", "strain and current both map the log's column 'strain'")
 
 
 def test_a_log_with_more_rows_than_the_cap_is_refused_reading_no_further(tmp_path, monkeypatch, capsys):
@@ -199,12 +199,12 @@ def test_a_log_with_more_rows_than_the_cap_is_refused_reading_no_further(tmp_pat
 
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(data, "MAX_LOG_SAMPLES", 100)
-    frame = _log_frame(n=8000)
+    frame = log_frame(n=8000)
     frame.to_csv("rec.csv", index=False)
     frame.to_parquet("rec.parquet")
     for name in ("rec.csv", "rec.parquet"):
         assert main(["run", "--log", name, "--out", "o"]) == 2
-        _one_error(capsys, name, "more than the 100 rows a log may hold")
+        one_error(capsys, name, "more than the 100 rows a log may hold")
 
 
 # --------------------------------------------------------------------------- options
@@ -214,7 +214,7 @@ def test_a_value_of_5000_digits_is_one_line(tmp_path, monkeypatch, capsys):
     for value, words in (("1" * 5000, ["5000 characters"]), ("9" * 40, ["beyond 64 bits"]),
                          ("1e999", ["not a finite number"]), ("nan", ["not a finite number"])):
         assert main(["run", "--methods", f"lowpass[cutoff_hz={value}]", "--out", "o"]) == 2
-        _one_error(capsys, "lowpass", "cutoff_hz", *words)
+        one_error(capsys, "lowpass", "cutoff_hz", *words)
     assert not (tmp_path / "o").exists()
 
 
@@ -228,7 +228,7 @@ def test_a_variant_grid_of_1e9_points_is_refused_before_it_is_made(tmp_path, mon
     assert main(["run", "--methods", f"raw[a={values},b={values},c={values}]", "--out", "o"]) == 2
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
-    _one_error(capsys, "1e+09 variants", "more than the 1000")
+    one_error(capsys, "1e+09 variants", "more than the 1000")
     assert peak < 200e6, peak   # a few MB of parsing; the grid itself would be gigabytes
 
 
@@ -238,7 +238,7 @@ def test_a_sweep_of_40000_points_is_refused_before_it_is_made(tmp_path, monkeypa
     ratios = ",".join(f"{30 + 0.6 * i:g}" for i in range(200))
     assert main(["sweep", "--param", f"joint.control_rate={rates}", "--param", f"joint.gear_ratio={ratios}",
                  "--methods", "raw", "--out", "o"]) == 2
-    _one_error(capsys, "a grid of 40000 points (200 x 200 values)", "more than the 1000")
+    one_error(capsys, "a grid of 40000 points (200 x 200 values)", "more than the 1000")
     assert not (tmp_path / "o").exists()
 
 
@@ -249,16 +249,16 @@ def test_a_run_of_more_rows_than_the_cap_is_refused_before_planning(tmp_path, mo
     monkeypatch.setattr(rows, "MAX_ROWS", 10)
     assert main(["run", "--methods", "raw,lowpass", "--scenarios", "creep,reversal", "--seeds", "3",
                  "--out", "o"]) == 2
-    _one_error(capsys, "2 methods x 2 scenarios x 1 conditions x 3 seeds is 12 rows", "more than the 10")
+    one_error(capsys, "2 methods x 2 scenarios x 1 conditions x 3 seeds is 12 rows", "more than the 10")
     assert not (tmp_path / "o").exists()
 
 
 def test_tune_budget_and_seeds_are_bounded(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     assert main(["tune", "--budget", "1000000", "--out", "t.json"]) == 2
-    _one_error(capsys, "--budget", "1-1024", "1000000")
+    one_error(capsys, "--budget", "1-1024", "1000000")
     assert main(["tune", "--seeds", "0-99999999999", "--out", "t.json"]) == 2
-    _one_error(capsys, "--seeds", "more than the 10000")
+    one_error(capsys, "--seeds", "more than the 10000")
     assert not (tmp_path / "t.json").exists()
 
 

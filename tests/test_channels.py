@@ -11,7 +11,7 @@ from rippleb.data import make_log
 from rippleb.engine.cache import log_bytes, log_from_bytes
 from rippleb.layouts import GaugeSettings
 from rippleb.log_columns import MAX_CHANNELS, channel_columns
-from rippleb.scenario import load_scenario
+from rippleb.simulator.scenario import load_scenario
 
 SPEC = JointSpec()
 

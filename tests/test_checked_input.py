@@ -20,19 +20,9 @@ from conftest import vouch_for
 
 import rippleb  # noqa: F401 - before numpy: the portable numeric paths
 from rippleb.cli import main
-from test_bad_input import GOOD, PLUGIN, _dist
+from support import GOOD, PLUGIN, install_dist, one_error
 
 SELECTION = {"methods": ["raw"], "conditions": ["same-session"], "seeds": [0], "scenarios": ["static-contact"]}
-
-
-def _one_error(capsys, *words) -> str:
-    """The single stderr line of a refused command; it names every one of ``words``."""
-    err = capsys.readouterr().err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("rippleb: error: "), err
-    for word in words:
-        assert word in lines[0], (word, lines[0])
-    return lines[0]
 
 
 def _run_dir(tmp_path, **changes) -> str:
@@ -60,7 +50,7 @@ def test_a_damaged_run_json_is_one_line_on_resume(tmp_path, capsys, field, value
     if field == "methods":
         words = ["'methods'"]
     assert main(["run", "--resume", out, "--no-progress"]) == 2
-    _one_error(capsys, f"{out}/run.json", *words)
+    one_error(capsys, f"{out}/run.json", *words)
     assert sorted(p.name for p in (tmp_path / "run").iterdir()) == ["run.json"]   # nothing written
 
 
@@ -73,7 +63,7 @@ def test_options_that_resume_would_ignore_are_refused(tmp_path, monkeypatch, cap
     monkeypatch.chdir(tmp_path)
     out = _run_dir(tmp_path, sweep={"joint.fs": [20000.0]} if command == "sweep" else None)
     assert main([command, "--resume", out, *extra, "--no-progress"]) == 2
-    _one_error(capsys, *words)
+    one_error(capsys, *words)
     assert not (tmp_path / "elsewhere").exists()
     assert sorted(p.name for p in (tmp_path / "run").iterdir()) == ["run.json"]
 
@@ -83,19 +73,19 @@ def test_seeds_have_an_upper_bound(tmp_path, monkeypatch, capsys):
 
     monkeypatch.chdir(tmp_path)
     assert main(["run", "--methods", "raw", "--seeds", "100000", "--out", "out"]) == 2
-    _one_error(capsys, "--seeds 100000", f"at most {MAX_SEEDS}")
+    one_error(capsys, "--seeds 100000", f"at most {MAX_SEEDS}")
     assert main(["sweep", "--param", "joint.fs=20000", "--seeds", str(MAX_SEEDS + 1), "--out", "out"]) == 2
-    _one_error(capsys, f"at most {MAX_SEEDS}")
+    one_error(capsys, f"at most {MAX_SEEDS}")
     out = _run_dir(tmp_path, seeds=list(range(MAX_SEEDS + 1)))
     assert main(["run", "--resume", out]) == 2
-    _one_error(capsys, "'seeds'", f"{MAX_SEEDS + 1} seeds")
+    one_error(capsys, "'seeds'", f"{MAX_SEEDS + 1} seeds")
     assert not (tmp_path / "out").exists()
 
 
 def test_a_sweep_of_no_values_is_refused(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     assert main(["sweep", "--param", "joint.fs=,,", "--methods", "raw", "--out", "out"]) == 2
-    _one_error(capsys, "--param 'joint.fs=,,'", "no values")
+    one_error(capsys, "--param 'joint.fs=,,'", "no values")
     assert not (tmp_path / "out").exists()
 
 
@@ -103,7 +93,7 @@ def test_a_sweep_of_no_values_is_refused(tmp_path, monkeypatch, capsys):
 @pytest.mark.parametrize("name", ["all", "a,b", "ALL", "has space", "../up"])
 def test_a_plugin_named_all_or_not_an_identifier_is_refused_at_discovery(tmp_path, name):
     site = tmp_path / "site"
-    _dist(site, "rippleb-oddname", "odd_mod", PLUGIN, {name: "Plugin"})
+    install_dist(site, "rippleb-oddname", "odd_mod", PLUGIN, {name: "Plugin"})
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")])}
     for args in (["list"], ["run", "--methods", "raw", "--seeds", "1", "--out", "out"]):
         proc = subprocess.run([sys.executable, "-m", "rippleb", *args], cwd=tmp_path, env=env,
@@ -182,7 +172,7 @@ def test_a_bar_in_a_scenario_name_stays_in_its_cell(run_copy, capsys):
 def test_report_of_a_run_file_that_is_a_list_is_one_line(run_copy, capsys, where):
     (run_copy / where).write_text("[1, 2]\n")
     assert main(["report", str(run_copy), "--no-figures"]) == 2
-    _one_error(capsys, f"{run_copy}/{where}", "not a rippleb run file", "JSON list")
+    one_error(capsys, f"{run_copy}/{where}", "not a rippleb run file", "JSON list")
 
 
 @pytest.mark.slow
@@ -196,7 +186,7 @@ def test_report_on_a_full_disk_is_one_line(run_copy, monkeypatch, capsys):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
     monkeypatch.setattr(matplotlib.figure.Figure, "savefig", full)
     assert main(["report", str(run_copy), "--speed-seeds", "1"]) == 2
-    _one_error(capsys, f"{run_copy}/report", "cannot write", "No space left on device")
+    one_error(capsys, f"{run_copy}/report", "cannot write", "No space left on device")
     assert (run_copy / "results.csv").is_file()
 
 

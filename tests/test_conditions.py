@@ -16,7 +16,7 @@ from rippleb.simulator.conditions import (AGED_AMPLITUDE_SIGMA, AGED_PHASE_SIGMA
                                           re_assembled)
 from rippleb.layouts import GaugeSettings
 from rippleb.scoring.metrics import Truth, score
-from rippleb.scenario import load_scenario, scenario_from_dict
+from rippleb.simulator.scenario import load_scenario, scenario_from_dict
 from rippleb.simulator import Device
 from rippleb.simulator.flexspline import channel_devices
 from rippleb.harness import prepare_blocks, stream

@@ -19,7 +19,7 @@ import pandas as pd
 import pytest
 
 from rippleb.engine.process.pool import Pool
-from test_bad_input import _dist  # a minimal installed distribution without pip
+from support import install_dist  # a minimal installed distribution without pip
 
 GIB = 2**30
 
@@ -98,7 +98,7 @@ def test_the_memory_limit_binds_the_worker_and_nothing_else(tmp_path):
 @pytest.fixture(scope="module")
 def lifter_site(tmp_path_factory):
     site = tmp_path_factory.mktemp("site")
-    _dist(site, "rippleb-lifter", "lifter_plugin", LIFTER, {"lifter": "Lifter"})
+    install_dist(site, "rippleb-lifter", "lifter_plugin", LIFTER, {"lifter": "Lifter"})
     return site
 
 

@@ -17,61 +17,9 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from support import BIN, Cluster, read_results, rippleb_cli, same_accuracy, stop_process
 
 pytestmark = pytest.mark.slow
-
-BIN = Path(sys.executable).parent
-ACCURACY = ["rms_error_nm", "max_error_nm", "rms_error_ref_nm", "max_error_ref_nm", "delay_ms",
-            "restart_max_error_nm", "stopped_rms_error_nm"]
-KEY = ["method", "scenario", "condition", "seed"]
-START_TIMEOUT_S = 90
-
-
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
-def _start(*args: str, log: Path) -> subprocess.Popen:
-    # Own session: the finalizer ends each command with everything it started.
-    return subprocess.Popen([str(BIN / "dask"), *args], stdout=open(log, "wb"), stderr=subprocess.STDOUT,
-                            start_new_session=True)
-
-
-def _stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-    proc.wait(timeout=30)
-
-
-class Cluster:
-    """A scheduler and ``n`` single-thread workers on 127.0.0.1."""
-
-    def __init__(self, tmp: Path, n: int = 2):
-        self.tmp, self.port = tmp, _free_port()
-        self.address = f"tcp://127.0.0.1:{self.port}"
-        self.scheduler = _start("scheduler", "--host", "127.0.0.1", "--port", str(self.port), "--no-dashboard",
-                                log=tmp / "scheduler.log")
-        self.workers = [self.add_worker(i) for i in range(n)]
-
-    def add_worker(self, i: int) -> subprocess.Popen:
-        return _start("worker", self.address, "--nthreads", "1", "--no-dashboard", "--host", "127.0.0.1",
-                      log=self.tmp / f"worker{i}.log")
-
-    def wait_for_workers(self, n: int) -> None:
-        from distributed import Client
-
-        with Client(self.address, timeout=START_TIMEOUT_S) as client:
-            client.wait_for_workers(n, timeout=START_TIMEOUT_S)
-
-    def close(self) -> None:
-        for proc in [*self.workers, self.scheduler]:
-            _stop(proc)
-
 
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory):
@@ -85,43 +33,26 @@ def cluster(tmp_path_factory):
         c.close()
 
 
-def rippleb(*args, **kwargs):
-    return subprocess.run([str(BIN / "rippleb"), *map(str, args)], capture_output=True, text=True,
-                          timeout=600, **kwargs)
-
-
-def _read(out: Path) -> pd.DataFrame:
-    frame = pd.read_csv(out / "results.csv")
-    return frame.sort_values([c for c in frame.columns if c in KEY or c.startswith("joint.")]).reset_index(drop=True)
-
-
-def _same_accuracy(a: pd.DataFrame, b: pd.DataFrame) -> None:
-    keys = [c for c in a.columns if c in KEY or c.startswith("joint.")]
-    assert a[keys].equals(b[keys])
-    assert (a["status"] == "ok").all() and (b["status"] == "ok").all()
-    pd.testing.assert_frame_equal(a[ACCURACY], b[ACCURACY], check_exact=True)
-
-
 def test_run_and_sweep_on_a_cluster_equal_a_local_run(cluster, tmp_path):
     common = ["--methods", "lowpass,angle-adaptive", "--scenarios", "paper-quintic", "--seeds", "2",
               "--no-progress"]
-    remote = rippleb("run", *common, "--scheduler", cluster.address, "--out", tmp_path / "remote")
+    remote = rippleb_cli("run", *common, "--scheduler", cluster.address, "--out", tmp_path / "remote")
     assert remote.returncode == 0, remote.stderr
-    local = rippleb("run", *common, "--jobs", "2", "--out", tmp_path / "local")
+    local = rippleb_cli("run", *common, "--jobs", "2", "--out", tmp_path / "local")
     assert local.returncode == 0, local.stderr
-    a, b = _read(tmp_path / "remote"), _read(tmp_path / "local")
+    a, b = read_results(tmp_path / "remote"), read_results(tmp_path / "local")
     assert len(a) == 4
-    _same_accuracy(a, b)
+    same_accuracy(a, b)
 
     sweep = ["sweep", "--param", "joint.counts_per_rev=500,2500", "--methods", "angle-adaptive",
              "--scenarios", "paper-quintic", "--seeds", "1", "--no-progress"]
-    remote = rippleb(*sweep, "--scheduler", cluster.address, "--out", tmp_path / "sweep-remote")
+    remote = rippleb_cli(*sweep, "--scheduler", cluster.address, "--out", tmp_path / "sweep-remote")
     assert remote.returncode == 0, remote.stderr
-    local = rippleb(*sweep, "--jobs", "2", "--out", tmp_path / "sweep-local")
+    local = rippleb_cli(*sweep, "--jobs", "2", "--out", tmp_path / "sweep-local")
     assert local.returncode == 0, local.stderr
-    a, b = _read(tmp_path / "sweep-remote"), _read(tmp_path / "sweep-local")
+    a, b = read_results(tmp_path / "sweep-remote"), read_results(tmp_path / "sweep-local")
     assert sorted(a["joint.counts_per_rev"]) == [500, 2500]
-    _same_accuracy(a, b)
+    same_accuracy(a, b)
     # the two grid points are two devices' worth of rows, not one row twice
     assert a["rms_error_nm"].nunique() == 2
 
@@ -138,14 +69,14 @@ def test_a_worker_killed_mid_run_loses_no_row(cluster, tmp_path):
         while not (out / "results.csv").is_file() and time.monotonic() < deadline and run.poll() is None:
             time.sleep(0.2)
         assert run.poll() is None, "the run ended before a worker could be killed"
-        _stop(cluster.workers[0])
+        stop_process(cluster.workers[0])
         _, stderr = run.communicate(timeout=600)
     finally:
         if run.poll() is None:
             run.kill()
             run.wait()
     assert run.returncode == 0, stderr
-    frame = _read(out)
+    frame = read_results(out)
     assert len(frame) == 3 * 2 * 2  # every row is there
     lost = frame[frame["status"] != "ok"]
     assert lost["message"].astype(str).str.contains("worker").all(), lost["message"].tolist()
@@ -168,7 +99,7 @@ def test_a_scheduler_killed_mid_run_is_one_line_and_the_run_resumable(tmp_path):
         while not (out / "results.csv").is_file() and time.monotonic() < deadline and run.poll() is None:
             time.sleep(0.1)
         assert run.poll() is None, "the run ended before the scheduler could be killed"
-        _stop(own.scheduler)
+        stop_process(own.scheduler)
         _, stderr = run.communicate(timeout=120)   # a lost scheduler must not keep it waiting
     finally:
         if run is not None and run.poll() is None:
@@ -185,7 +116,7 @@ def test_a_scheduler_killed_mid_run_is_one_line_and_the_run_resumable(tmp_path):
     cancelled = kept.loc[kept.status != "ok", "message"].astype(str)
     assert cancelled.str.startswith("environment: ").all(), cancelled.tolist()
 
-    resumed = rippleb("run", "--resume", out, "--jobs", "2", "--no-progress")   # on the local pool
+    resumed = rippleb_cli("run", "--resume", out, "--jobs", "2", "--no-progress")   # on the local pool
     assert resumed.returncode == 0, resumed.stderr
     rows = pd.read_csv(out / "results.csv")
     assert len(rows) == 18 and (rows.status == "ok").all()

@@ -13,7 +13,7 @@ from rippleb.engine.executors import RowTask, run_task
 from rippleb.registry import Registry
 from rippleb.engine.rows import RowKey
 from rippleb.engine.runner import run
-from rippleb.scenario import load_scenario
+from rippleb.simulator.scenario import load_scenario
 
 ACCURACY = ["rms_error_nm", "max_error_nm", "rms_error_ref_nm", "delay_ms", "stopped_rms_error_nm"]
 

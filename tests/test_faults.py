@@ -15,7 +15,7 @@ import pytest
 
 import rippleb
 from rippleb import InputError, make_log
-from rippleb.scenario import Faults, scenario_from_dict
+from rippleb.simulator.scenario import Faults, scenario_from_dict
 from rippleb.simulator import simulate
 from rippleb.simulator.sensors import STRAIN_RANGE
 

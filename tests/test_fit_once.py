@@ -11,7 +11,7 @@ import rippleb
 from rippleb import Method
 from rippleb.scoring.metrics import Truth
 from rippleb.engine.runner import evaluate
-from test_runner import fake_simulate
+from support import fake_simulate
 
 FIT_MARK = "counts-fits: fitting"
 ACCURACY = ["rms_error_nm", "max_error_nm", "rms_error_ref_nm", "max_error_ref_nm", "delay_ms",

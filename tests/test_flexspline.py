@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from rippleb import InputError, simulate
 from rippleb.layouts import LAYOUT_NAMES, GaugeSettings, cancelled_orders, layout, order_weights
-from rippleb.scenario import scenario_from_dict
+from rippleb.simulator.scenario import scenario_from_dict
 from rippleb.simulator import Device
 from rippleb.simulator.device import RIPPLE_ORDERS
 from rippleb.simulator.flexspline import FIELD_ORDERS, GaugeErrors, channel_devices, channel_weights, field

@@ -13,7 +13,7 @@ from rippleb.layouts import GaugeSettings, layout, order_weights
 from rippleb.methods.gain_tuned import GainTuned, harmonic_design, tuned_weights
 from rippleb.methods.lowpass import Lowpass
 from rippleb.methods.raw import Raw
-from rippleb.scenario import load_scenario
+from rippleb.simulator.scenario import load_scenario
 from rippleb.testing import check_method, slice_log
 
 SPEC = JointSpec()

@@ -91,7 +91,7 @@ def test_hostile_names_render_as_themselves():
     a results file, a directory; a swept column is one of rippleb's parameters): the section
     renders none of it as markup, on GitHub (cmark-gfm, raw HTML let through) and on the
     HTML page."""
-    from test_report_escaping import HOSTILE, Page, render
+    from support import HOSTILE, Page, render
 
     names = {"a": HOSTILE[0], "b": HOSTILE[4], "c": HOSTILE[2]}
     report, sweep = REPORT.replace({"method": names}), _sweep().replace({"method": names})

@@ -23,7 +23,7 @@ from hypothesis import given, settings, strategies as st
 
 from rippleb.engine.process.joblog import OUTPUT_CAP_BYTES, JobLog
 from rippleb.printable import escaped
-from test_bad_input import _dist  # a minimal installed distribution without pip
+from support import install_dist  # a minimal installed distribution without pip
 
 #: A terminal escape that retitles the window, clears the screen and rings the bell.
 ESCAPE = "\x1b]0;owned\x07\x1b[2J\x1b[31mred\r\x9b"
@@ -66,7 +66,7 @@ def finished(tmp_path_factory):
     """``(directory, site, first run)``: one finished run of chatty, escaper and raw."""
     where = tmp_path_factory.mktemp("hostile")
     site = where / "site"
-    _dist(site, "rippleb-hostile", "rippleb_hostile", HOSTILE, {"chatty": "Chatty", "escaper": "Escaper"})
+    install_dist(site, "rippleb-hostile", "rippleb_hostile", HOSTILE, {"chatty": "Chatty", "escaper": "Escaper"})
     proc = _cli(where, site, "run", "--methods", "chatty,escaper,raw", "--scenarios", "static-contact",
                 "--seeds", "1", "--jobs", "2", "--no-progress", "--out", "run")
     assert proc.returncode == 0, proc.stderr
@@ -328,7 +328,7 @@ def _assert_walls_held(found, run):
 @pytest.fixture(scope="module")
 def breaker_site(tmp_path_factory):
     site = tmp_path_factory.mktemp("breaker-site")
-    _dist(site, "rippleb-breaker", "rippleb_breaker", BREAKER, {"breaker": "Breaker"})
+    install_dist(site, "rippleb-breaker", "rippleb_breaker", BREAKER, {"breaker": "Breaker"})
     yield site
     import sysconfig
 

@@ -14,30 +14,11 @@ import pytest
 from rippleb.report import html_report
 from rippleb.report.stats import METHOD_ORDER
 from rippleb.scoring.metrics import METRIC_COLUMNS
+from support import conditions_frame
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                   "--disable-background-networking", "--disable-component-update", "--disable-sync"]
-
-
-def conditions_frame(seeds=4):
-    """Rows of three methods on two scenarios under two conditions; kalman-ripple leads
-    under same-session and falls behind order-tracking under re-assembled."""
-    rng = np.random.default_rng(3)
-    base = {("same-session", "kalman-ripple"): 0.2, ("re-assembled", "kalman-ripple"): 1.0}
-    rows = []
-    for condition in ("same-session", "re-assembled"):
-        for method in ("raw", "order-tracking", "kalman-ripple"):
-            for scenario in ("paper-quintic", "creep"):
-                for seed in range(seeds):
-                    level = base.get((condition, method), {"raw": 2.0, "order-tracking": 0.5}.get(method))
-                    rows.append({"method": method, "scenario": scenario, "condition": condition, "seed": seed,
-                                 "status": "ok", "message": "",
-                                 "rms_error_nm": level * (1 + 0.05 * rng.standard_normal()),
-                                 "max_error_nm": 3 * level, "rms_error_ref_nm": level, "max_error_ref_nm": 3 * level,
-                                 "delay_ms": 1.0, "us_per_tick_p50": 5.0, "us_per_tick_p99": 12.0})
-    # every metric column a results file has (the reader refuses a file without one)
-    return pd.DataFrame(rows).reindex(columns=list(dict.fromkeys([*rows[0], *METRIC_COLUMNS])))
 
 
 PROV = {"run": {"command": "rippleb run", "jobs": 2, "cpu_count": 2}, "report": {"command": "rippleb report"},

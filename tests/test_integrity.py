@@ -20,7 +20,7 @@ import pandas as pd
 import pytest
 from conftest import HANG_TIMEOUT_S
 
-from test_bad_input import _dist  # a minimal installed distribution without pip
+from support import NAPPER, install_dist, nap, napping
 
 pytestmark = pytest.mark.slow
 
@@ -158,24 +158,6 @@ HOSTILE = textwrap.dedent('''
         def step(self, block):
             return block.strain * 0.0
 ''')
-NAPPING = "napping"
-NAPPER = textwrap.dedent(f'''
-    import os, time
-    from rippleb import Method
-    NAPPING = {NAPPING!r}
-
-    class Napper(Method):
-        """Sleeps in its fit (to be interrupted) while a file NAP lies beside its module (it may
-        ask whether a file exists, not read it, and it inherits no environment: issue 41),
-        and says so on its log, the one file it may write (issue 34)."""
-        name = "napper"
-        def fit(self, calibration):
-            if os.path.exists(os.path.join(os.path.dirname(__file__), "NAP")):
-                print(NAPPING, flush=True)
-                time.sleep(3600)
-        def step(self, block):
-            return block.strain * 0.0
-''')
 SLOW_IMPORT = "import time\ntime.sleep(3600)\n"
 EXITS = "raise SystemExit(3)\n"
 
@@ -183,30 +165,13 @@ EXITS = "raise SystemExit(3)\n"
 @pytest.fixture(scope="module")
 def site(tmp_path_factory):
     site = tmp_path_factory.mktemp("hostile-site")
-    _dist(site, "rippleb-hostile", "rippleb_hostile", HOSTILE,
+    install_dist(site, "rippleb-hostile", "rippleb_hostile", HOSTILE,
           {"forger": "Forger", "peeker": "Peeker", "spawner": "Spawner", "killer": "Killer",
            "rummager": "Rummager"})
-    _dist(site, "rippleb-slow", "rippleb_slow", SLOW_IMPORT, {"slow-import": "Anything"})
-    _dist(site, "rippleb-exits", "rippleb_exits", EXITS, {"exits": "Anything"})
-    _dist(site, "rippleb-napper", "rippleb_napper", NAPPER, {"napper": "Napper"})
+    install_dist(site, "rippleb-slow", "rippleb_slow", SLOW_IMPORT, {"slow-import": "Anything"})
+    install_dist(site, "rippleb-exits", "rippleb_exits", EXITS, {"exits": "Anything"})
+    install_dist(site, "rippleb-napper", "rippleb_napper", NAPPER, {"napper": "Napper"})
     return site
-
-
-@contextlib.contextmanager
-def nap(site):
-    """The napper sleeps in its fit while this block runs (a file NAP beside its module)."""
-    flag = Path(site) / "NAP"
-    flag.touch()
-    try:
-        yield
-    finally:
-        flag.unlink(missing_ok=True)
-
-
-def napping(out) -> bool:
-    """Whether the napper's fit in run directory ``out`` is asleep (its log says so)."""
-    log = out / "logs" / "fit--napper--0.txt"
-    return log.is_file() and NAPPING in log.read_text()
 
 
 def _env(site, tmp):

@@ -16,7 +16,7 @@ from conftest import vouch_for
 import rippleb
 from rippleb import InputError
 from rippleb.engine.results import COLUMNS, RunWarning, read_rows
-from test_runner import fake, fake_simulate  # noqa: F401 - the fixture is used by name
+from support import fake_perfect as fake, fake_simulate  # noqa: F401 - the fixture is used by name
 
 SCENARIO = textwrap.dedent("""\
     [robot]

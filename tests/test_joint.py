@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rippleb import simulate
-from rippleb.scenario import load_scenario
+from rippleb.simulator.scenario import load_scenario
 from rippleb.simulator import Device, controller, joint, robot
 from rippleb.simulator import device as device_module
 

@@ -142,7 +142,7 @@ CHIRP_FS = 2000.0
 
 def _chirp_case(seconds=6.0):
     """A truth of two 8 Nm log sweeps 0.5-80 Hz on a slow drift, and its Truth."""
-    from rippleb.scenario import Load
+    from rippleb.simulator.scenario import Load
 
     t = np.arange(int(seconds * CHIRP_FS)) / CHIRP_FS
     loads = [Load(torque=8.0, start=0.2, stop=2.9, kind="chirp", f0=0.5, f1=80.0),
@@ -194,7 +194,7 @@ def test_bandwidth_bounds_and_nan():
 
 def _step_case(delay_s=0.0, lost=()):
     """Steps of +10 (at 0.2 s) and -10 Nm (at 0.6 s) with 10 ms rise; estimate delayed."""
-    from rippleb.scenario import Load
+    from rippleb.simulator.scenario import Load
 
     t = np.arange(int(1.0 * FS)) / FS
     load = Load(torque=10.0, start=0.2, stop=0.6, rise=0.01)

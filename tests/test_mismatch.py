@@ -1,4 +1,4 @@
-"""The physics beyond the methods' models (rippleb/mismatch.py, docs/physics.md "Beyond the
+"""The physics beyond the methods' models (rippleb/simulator/mismatch.py, docs/physics.md "Beyond the
 methods' models"): each effect visible in a simulated log at its documented size, measured
 on the log; each off, the log is today's bit for bit."""
 
@@ -11,9 +11,9 @@ from hypothesis import strategies as st
 
 import rippleb  # noqa: F401  (before numpy users: the portable numeric paths)
 from rippleb import InputError, simulate
-from rippleb.mismatch import KNOB_BY_NAME, KNOBS, REALISTIC, Unmodelled
+from rippleb.simulator.mismatch import KNOB_BY_NAME, KNOBS, REALISTIC, Unmodelled
 from rippleb.engine.rows import scenario_hash
-from rippleb.scenario import load_scenario, scenario_from_dict
+from rippleb.simulator.scenario import load_scenario, scenario_from_dict
 from rippleb.simulator import controller, daq, gauge
 from rippleb.simulator.conditions import CONDITIONS, calibration_condition
 from rippleb.simulator.encoder import EncoderErrors, counts

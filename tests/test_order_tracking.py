@@ -346,7 +346,7 @@ def _order_power(estimate, encoder, counts_per_rev, orders):
 @pytest.mark.parametrize("seed", [0, 1])
 def test_ripple_at_orders_2_4_8_falls_by_20_db_at_constant_speed(seed, tmp_path):
     from rippleb.methods.raw import Raw
-    from rippleb.scenario import load_scenario
+    from rippleb.simulator.scenario import load_scenario
     from rippleb.simulator import simulate
     from rippleb.harness import run_method
 

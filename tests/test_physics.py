@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from rippleb import load_scenario, simulate
-from rippleb.scenario import scenario_from_dict
+from rippleb.simulator.scenario import scenario_from_dict
 from rippleb.simulator import Device
 
 SPEEDS_WG = (1.0, 3.0, 6.0)  # wave-generator revolutions per second

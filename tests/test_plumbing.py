@@ -20,7 +20,7 @@ import pandas as pd
 import pytest
 
 import rippleb
-from test_bad_input import _dist  # a minimal installed distribution without pip
+from support import install_dist  # a minimal installed distribution without pip
 
 pytestmark = pytest.mark.slow
 
@@ -116,7 +116,7 @@ def _assert_nothing_reached(found, run_dir):
 @pytest.fixture(scope="module")
 def site(tmp_path_factory):
     site = tmp_path_factory.mktemp("prober-site")
-    _dist(site, "rippleb-prober", "rippleb_prober", PROBER, {"prober": "Prober"})
+    install_dist(site, "rippleb-prober", "rippleb_prober", PROBER, {"prober": "Prober"})
     return site
 
 

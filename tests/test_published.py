@@ -31,7 +31,7 @@ from conftest import off_lock
 from rippleb.report import publication, writer as report
 from rippleb.simulator.conditions import CONDITIONS
 from rippleb.registry import Registry
-from rippleb.scenario import scored_scenarios
+from rippleb.simulator.scenario import scored_scenarios
 
 RESULTS = Path(__file__).resolve().parent.parent / "results"
 PUBLISHED = RESULTS / "results.csv"

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
-from rippleb.mismatch import Unmodelled
+from rippleb.simulator.mismatch import Unmodelled
 from rippleb.simulator.device import Device
 from rippleb.simulator.gauge import EXTRA_ORDERS, play, wave_ripple
 from rippleb.data import JointSpec

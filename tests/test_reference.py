@@ -72,7 +72,7 @@ def test_reference_model_error_matches_the_spread_it_comes_from():
     robots follows from each link's sensitivity and the two spreads (0.45 Nm here)."""
     import pinocchio as pin
 
-    from rippleb.scenario import load_scenario
+    from rippleb.simulator.scenario import load_scenario
 
     sc = load_scenario("paper-quintic")
     t = np.arange(0, sc.duration, 1e-3)

@@ -9,7 +9,6 @@ strictest reading), in ``index.html`` (parsed), and in the figures (matplotlib's
 
 from __future__ import annotations
 
-import html.parser
 import re
 
 import pytest
@@ -19,44 +18,14 @@ from rippleb.printable import escaped, markdown_code, markdown_text
 from rippleb.report import html_report
 from rippleb.report.markdown import markdown, one_line
 from rippleb.report.markdown_html import inline_html, table_html
+from support import HOSTILE, Page, render
 
 cmark = pytest.importorskip("cmarkgfm.cmark")
 
 #: Elements a report's README renders to (its own words set one in bold); no text of a row makes another.
 README_ELEMENTS = {"h1", "h2", "h3", "h4", "p", "ul", "li", "table", "thead", "tbody", "tr", "th", "td",
                    "code", "img", "a", "strong"}
-HOSTILE = ['<script>alert(1)</script>', '<img src=x onerror=alert(2)>', '[click](javascript:alert(3))',
-           '<javascript:alert(4)>', '`a`<img src=y onerror=alert(5)>', '=HYPERLINK("http://e","x")',
-           '$\\x$ *b* _c_ ~~d~~ www.evil.example http://evil.example &lt;b&gt;', '| split | me |']
 
-
-def render(text: str) -> str:
-    """``text`` as GitHub renders it, but with raw HTML passed through (no sanitiser, no tag
-    filter): whatever would become an element somewhere does here."""
-    return cmark.markdown_to_html_with_extensions(text, options=cmark.Options.CMARK_OPT_UNSAFE,
-                                                  extensions=["table", "strikethrough", "autolink"])
-
-
-class Page(html.parser.HTMLParser):
-    """The elements of an HTML text, with their attributes, and its text."""
-
-    def __init__(self, text: str):
-        super().__init__(convert_charrefs=True)
-        self.elements, self.chunks = [], []
-        self.feed(text)
-
-    def handle_starttag(self, tag, attrs):
-        self.elements.append((tag, dict(attrs)))
-
-    def handle_data(self, data):
-        self.chunks.append(data)
-
-    @property
-    def text(self) -> str:
-        return "".join(self.chunks)
-
-    def tags(self) -> list[str]:
-        return [tag for tag, _ in self.elements]
 
 
 # Any text, with the characters and sequences Markdown and HTML act on made frequent.
@@ -112,7 +81,7 @@ def test_the_html_page_renders_the_report_s_markdown_as_github_does(value):
 def hostile_frame():
     """Rows whose every text field carries markup: method labels, scenario and condition
     names, a status-error message (as a results file someone else wrote could hold)."""
-    from test_html_report import conditions_frame
+    from support import conditions_frame
 
     frame = conditions_frame(seeds=3)
     names = {"raw": f'hostile[tag="{HOSTILE[0]}"]', "order-tracking": HOSTILE[4], "kalman-ripple": "kalman-ripple"}

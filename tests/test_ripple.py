@@ -6,10 +6,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rippleb import simulate
-from rippleb.scenario import HYSTERESIS_NM, RippleSettings
+from rippleb.simulator.scenario import HYSTERESIS_NM, RippleSettings
 from rippleb.simulator.ripple import (OutputRipple, _hysteresis_reference,
                                     bridge_ripple, hysteresis)
-from rippleb.scenario import scenario_from_dict
+from rippleb.simulator.scenario import scenario_from_dict
 
 LOAD_NM = 20.0
 

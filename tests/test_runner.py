@@ -12,36 +12,7 @@ import rippleb
 from rippleb import InputError, JointSpec, Method, make_log
 from rippleb.engine import runner as runner_mod
 from rippleb.engine.results import COLUMNS
-
-N = 4000  # 0.2 s at 20 kHz: 200 ticks
-
-
-def fake_simulate(scenario, seed, condition="same-session"):
-    """A tiny simulation: torque is a slow sine, strain carries it plus an order-4 ripple."""
-    name = getattr(scenario, "name", scenario)
-    rng = np.random.default_rng([seed, len(name)])
-    spec = JointSpec()
-    t = np.arange(N) / spec.fs
-    torque = 10 * np.sin(2 * np.pi * 2 * t) + seed
-    wave = 2 * np.pi * 5 * t
-    strain = 0.01 * torque + 0.002 * np.sin(4 * wave)
-    encoder = np.floor(wave / (2 * np.pi) * spec.counts_per_rev)
-    log = make_log(spec, {"t": t, "strain": strain, "encoder": encoder, "current": torque / 7 + rng.normal(size=N),
-                          "torque_true": torque, "torque_ref": torque + 0.1},
-                   meta={"scenario": name, "seed": seed})
-    moving = t > 0.05
-    return SimpleNamespace(log=log, moving=moving, wave_angle=wave, eval_mask=t >= 0.01,
-                           joint_velocity=np.zeros(N))
-
-
-class Perfect(Method):
-    """Cheats with the strain model of fake_simulate, exactly."""
-    name = "perfect"
-
-    def step(self, block):
-        wave = 2 * np.pi * 5 * block.t
-        return (block.strain - 0.002 * np.sin(4 * wave)) / 0.01
-
+from support import FAKE_N, Perfect, fake_simulate
 
 class Raises(Method):
     name = "raises"
@@ -158,7 +129,7 @@ def test_metrics_and_provenance_of_an_ok_row(fake, tmp_path):
     row = frame.set_index("method").loc["perfect"]
     assert row.rms_error_nm < 1e-3 and row.delay_ms == 0 and row.seed == 3
     assert row.rms_error_ref_nm == pytest.approx(0.1, abs=1e-3)
-    assert row.us_per_tick_p50 > 0 and row.n_samples == N
+    assert row.us_per_tick_p50 > 0 and row.n_samples == FAKE_N
     assert row.rippleb_version == rippleb.__version__ and row.python and row.cpu
     assert frame.set_index("method").loc["raw"].rms_error_nm > 10 * row.rms_error_nm
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from rippleb import InputError, builtin_scenarios, load_scenario, scored_scenarios
-from rippleb.scenario import scenario_from_dict
+from rippleb.simulator.scenario import scenario_from_dict
 
 EXPECTED = {"paper-quintic", "stop-restart", "reversal", "creep", "speed-sweep",
             "load-steps", "static-contact", "torque-chirp", "calibration"}
@@ -174,7 +174,7 @@ def test_step_edges_are_the_on_and_off_edges_of_step_loads():
 
 
 def test_ripple_table_sets_the_drive_ripple_and_defaults_are_documented():
-    from rippleb.scenario import HYSTERESIS_NM, RippleSettings
+    from rippleb.simulator.scenario import HYSTERESIS_NM, RippleSettings
 
     assert load_scenario("paper-quintic").ripple == RippleSettings()
     assert RippleSettings().hysteresis_nm == HYSTERESIS_NM and RippleSettings().output_scale == 1.0

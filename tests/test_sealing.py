@@ -27,7 +27,7 @@ from rippleb import Method
 from rippleb.engine import sealing
 from rippleb.errors import InputError
 from rippleb.cli import main
-from test_bad_input import _dist  # a minimal installed distribution without pip
+from support import install_dist  # a minimal installed distribution without pip
 
 RESIMULATOR = textwrap.dedent('''
     import sys
@@ -71,11 +71,11 @@ RESIMULATOR = textwrap.dedent('''
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory):
-    from test_integrity import NAPPER
+    from support import NAPPER
 
     site = tmp_path_factory.mktemp("resimulator-site")
-    _dist(site, "rippleb-resimulator", "rippleb_resimulator", RESIMULATOR, {"resimulator": "Resimulator"})
-    _dist(site, "rippleb-napper", "rippleb_napper", NAPPER, {"napper": "Napper"})
+    install_dist(site, "rippleb-resimulator", "rippleb_resimulator", RESIMULATOR, {"resimulator": "Resimulator"})
+    install_dist(site, "rippleb-napper", "rippleb_napper", NAPPER, {"napper": "Napper"})
     return site
 
 
@@ -131,7 +131,7 @@ def test_an_interrupted_sealed_run_keeps_its_salt_and_resumes_with_it(site, tmp_
 
     args = [sys.executable, "-m", "rippleb", "run", "--methods", "napper,raw", "--scenarios", "static-contact",
             "--seeds", "1", "--jobs", "1", "--no-progress", "--out", "run", "--sealed", "salt"]
-    from test_integrity import nap, napping
+    from support import nap, napping
 
     with nap(site):
         runner = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,

@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rippleb import InputError, Simulation, load_scenario, simulate
-from rippleb.scenario import scenario_from_dict
+from rippleb.simulator.scenario import scenario_from_dict
 from rippleb.simulator import Device
 
 SHORT = scenario_from_dict({

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from test_dask import _read, _same_accuracy, rippleb
+from support import read_results, same_accuracy, rippleb_cli
 
 pytestmark = pytest.mark.slow
 pytest.importorskip("dask_jobqueue")
@@ -75,11 +75,11 @@ def test_the_documented_slurm_cluster_runs_rows_equal_to_a_local_run(tmp_path):
         assert "export DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL=1s" in script
 
         common = ["--methods", "raw,angle-adaptive", "--scenarios", "stop-restart", "--seeds", "1", "--no-progress"]
-        remote = rippleb("run", *common, "--scheduler", address, "--out", tmp_path / "remote")
+        remote = rippleb_cli("run", *common, "--scheduler", address, "--out", tmp_path / "remote")
         assert remote.returncode == 0, remote.stderr
-        local = rippleb("run", *common, "--jobs", "2", "--out", tmp_path / "local")
+        local = rippleb_cli("run", *common, "--jobs", "2", "--out", tmp_path / "local")
         assert local.returncode == 0, local.stderr
-        _same_accuracy(_read(tmp_path / "remote"), _read(tmp_path / "local"))
+        same_accuracy(read_results(tmp_path / "remote"), read_results(tmp_path / "local"))
 
         cluster.stdin.close()   # Ctrl-D: the script closes the cluster and cancels its jobs
         assert cluster.wait(timeout=60) == 0

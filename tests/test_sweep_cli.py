@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 from rippleb.engine.rows import scenario_hash
-from rippleb.scenario import Parser
+from rippleb.simulator.scenario import Parser
 
 from rippleb.report.sweep_report import figures, points
 

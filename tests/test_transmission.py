@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, strategies as st
 
 from rippleb.scoring.metrics import gear_removed
-from rippleb.scenario import load_scenario, scenario_from_dict
+from rippleb.simulator.scenario import load_scenario, scenario_from_dict
 from rippleb.simulator import Device, controller, joint, robot, simulate
 from rippleb.simulator.transmission import TransmissionError, structural_damping
 

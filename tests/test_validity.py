@@ -17,7 +17,7 @@ import pytest
 
 import rippleb
 from rippleb.cli import main
-from rippleb.scenario import load_scenario, scenario_from_dict, scored_scenarios
+from rippleb.simulator.scenario import load_scenario, scenario_from_dict, scored_scenarios
 from rippleb.simulator import simulate
 from rippleb.simulator import validity
 from rippleb.simulator.conditions import CONDITIONS

@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from test_bad_input import _dist  # a minimal installed distribution without pip
+from support import install_dist  # a minimal installed distribution without pip
 
 #: A value no honest process holds: exported to the runner, it must reach no method.
 SECRET = "rippleb-secret-5f1c0d6a9e2b47c8"
@@ -220,7 +220,7 @@ METHODS = {"prober": "Prober", "clockstopper": "Clockstopper", "framer": "Framer
 @pytest.fixture(scope="module")
 def site(tmp_path_factory):
     where = tmp_path_factory.mktemp("walls-site")
-    _dist(where, "rippleb-walls", "rippleb_walls", PROBER, METHODS)
+    install_dist(where, "rippleb-walls", "rippleb_walls", PROBER, METHODS)
     return where
 
 
@@ -342,7 +342,7 @@ def test_on_a_scheduler_started_by_hand_a_method_cannot_reach_it(site, tmp_path,
     worker`` processes (the plugin installed where they run); the prober tries
     ``run_on_scheduler`` on that address (before, its code ran in the scheduler and wrote rows
     with valid MACs)."""
-    from test_dask import Cluster
+    from support import Cluster
 
     _skip_without_walls()
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]))

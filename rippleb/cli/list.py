@@ -36,7 +36,7 @@ def cmd_list(args) -> int:
     """``rippleb list``."""
     from rippleb.layouts import LAYOUT_NAMES, cancelled_orders, layout
     from rippleb.registry import Registry
-    from rippleb.scenario import builtin_scenarios, load_scenario
+    from rippleb.simulator.scenario import builtin_scenarios, load_scenario
     from rippleb.simulator.conditions import CONDITIONS
 
     registry = Registry.discover()

@@ -71,7 +71,7 @@ def cmd_simulate(args) -> int:
 def _scenario(name: str, params: list[str]):
     """The scenario ``name`` with each ``--param NAME=VALUE`` set, checked as a sweep's point is."""
     from rippleb.engine.sweep import parse_params, swept_scenario
-    from rippleb.scenario import load_scenario
+    from rippleb.simulator.scenario import load_scenario
 
     if not params:
         return load_scenario(name)

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 from rippleb.errors import InputError
 from rippleb.layouts import LAYOUT_NAMES, MAX_MISALIGNMENT
-from rippleb.mismatch import KNOBS as _KNOBS
+from rippleb.simulator.mismatch import KNOBS as _KNOBS
 
 
 @dataclass(frozen=True)
@@ -95,7 +95,7 @@ PARAMS = {p.name: p for p in (
           "the gauges' placement, orientation and gain errors, x the documented sizes (default 1; 0: perfect)"),
 )}
 
-#: The physics beyond the methods' models (:mod:`rippleb.mismatch`, docs/physics.md "Beyond
+#: The physics beyond the methods' models (:mod:`rippleb.simulator.mismatch`, docs/physics.md "Beyond
 #: the methods' models"), one parameter per knob: properties of the joint, so its calibration
 #: session has them too. A value set by a sweep acts under every condition; under
 #: ``realistic`` the knobs not swept keep their documented magnitudes. Ranges: from off to a

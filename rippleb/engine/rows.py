@@ -121,7 +121,7 @@ def select_scenarios(given: list[str], load) -> list:
     scenarios that would share a name (``d1/x.toml`` and ``d2/x.toml``), or a file named
     like a built-in (``./creep.toml``, ``calibration.toml``), raise :class:`InputError`.
     """
-    from rippleb.scenario import builtin_scenarios
+    from rippleb.simulator.scenario import builtin_scenarios
 
     builtins = set(builtin_scenarios())
     chosen: dict[str, tuple[str, object, str]] = {}

@@ -121,7 +121,7 @@ def run(methods=None, scenarios=None, seeds=DEFAULT_SEEDS, *, conditions=None, s
         The rows sorted by (method, scenario, condition, seed), standard columns first
         (see ``rippleb.engine.results.COLUMNS``).
     """
-    from rippleb.scenario import load_scenario, scored_scenarios
+    from rippleb.simulator.scenario import load_scenario, scored_scenarios
 
     check_options(jobs=jobs, timeout=timeout, memory_mb=memory_mb)
     registry = Registry.discover()
@@ -153,7 +153,7 @@ def run_resolved(registry: Registry, names: list[str], entries: list[tuple], con
                  resume: bool = False, progress: bool | None = False, on_start=None, executor=None,
                  sealed=None, salt_file=None):
     """Run checked selections: ``entries`` holds ``(scenario, calibration scenario, extra key
-    columns)`` triples of resolved :class:`~rippleb.scenario.Scenario` objects.
+    columns)`` triples of resolved :class:`~rippleb.simulator.scenario.Scenario` objects.
 
     The extra columns (``{name: value}``, e.g. the swept values of :mod:`rippleb.engine.sweep`)
     become part of each row's key and columns, so two entries that share a scenario name

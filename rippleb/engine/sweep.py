@@ -3,7 +3,7 @@
 A swept parameter is a key of the scenario file (``joint.counts_per_rev``,
 ``temperature_c``, ...) set to each given value in every scenario of the run. The swept
 scenarios are built exactly as a file with that value would be (every range check of
-:mod:`rippleb.scenario` applies), so a sweep can ask for nothing a scenario file could
+:mod:`rippleb.simulator.scenario` applies), so a sweep can ask for nothing a scenario file could
 not. Each result row gets one column per swept parameter, named after it.
 
 Examples
@@ -105,7 +105,7 @@ def swept_scenario(name_or_path, point: dict):
     with the file, key and the swept values named.
     """
     from rippleb.reading import parse_toml
-    from rippleb.scenario import Parser, read_source
+    from rippleb.simulator.scenario import Parser, read_source
 
     text, path, name = read_source(name_or_path)
     raw = apply(parse_toml(text, path), point)
@@ -144,7 +144,7 @@ def run_sweep(params, methods=None, scenarios=None, seeds=None, *, conditions=No
     from rippleb import interrupts
     from rippleb.engine.rows import (CALIBRATION, check_rows, select_conditions, select_scenarios, select_seeds,
                                      split_names)
-    from rippleb.scenario import load_scenario, scored_scenarios
+    from rippleb.simulator.scenario import load_scenario, scored_scenarios
 
     sweeps = parse_params(_specs(params))
     check_options(jobs=options.get("jobs", 1), timeout=options.get("timeout", runner.DEFAULT_TIMEOUT_S),

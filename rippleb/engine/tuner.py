@@ -117,7 +117,7 @@ def tuning_plan(labels: list[str], seeds):
     device's calibration log and scored on the same session (one simulation, both roles)."""
     from rippleb.engine.rows import CALIBRATION, FITTING, SCORED, Case, RowKey, scenario_hash
     from rippleb.engine.scheduler import Plan
-    from rippleb.scenario import load_scenario
+    from rippleb.simulator.scenario import load_scenario
     from rippleb.simulator.conditions import DEFAULT_CONDITION
 
     calibration = load_scenario(CALIBRATION)

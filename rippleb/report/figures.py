@@ -47,7 +47,7 @@ def constant_speed_run(speed: float, seed: int, revolutions: float = 16.0, load:
     A known constant load ``load`` [Nm] makes the load-dependent ripple visible.
     Returns the :class:`~rippleb.simulator.Simulation` and the start of the cruise [s].
     """
-    from rippleb.scenario import scenario_from_dict
+    from rippleb.simulator.scenario import scenario_from_dict
     from rippleb.simulator import simulate
 
     ratio = 100.0

@@ -13,7 +13,7 @@ Two rules, applied to every row of a recorded log (:func:`rippleb.scoring.row.sc
   accuracy has nothing to be scored against.
 
 Simulated rows are not checked for scale: the simulator's loads stay within the rated range
-(:data:`rippleb.scenario.MAX_LOAD_FACTOR`) and their scores are against the truth.
+(:data:`rippleb.simulator.scenario.MAX_LOAD_FACTOR`) and their scores are against the truth.
 """
 
 from __future__ import annotations

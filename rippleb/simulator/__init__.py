@@ -14,7 +14,7 @@ module                    what it holds
 ``sensors``               strain bridge, current sense, encoder counter, ADCs, sensor faults
 ``conditions``            deployment conditions and the encoder's index pulse
 ``gauge``                 beyond the methods' models: the flexspline mode, non-affine and
-                          flank-dependent ripple, span drift (:mod:`rippleb.mismatch`)
+                          flank-dependent ripple, span drift (:mod:`rippleb.simulator.mismatch`)
 ``daq``                   beyond the methods' models: anti-alias filter, PWM pickup
 ``encoder``               beyond the methods' models: edge errors, eccentricity, missed counts
 ========================  ==========================================================

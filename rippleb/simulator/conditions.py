@@ -99,7 +99,7 @@ class Session:
         Count of the incremental encoder at the first sample, or None when the counter
         continues the calibration session's (absolute) count.
     realistic
-        The unset knobs of :mod:`rippleb.mismatch` take their documented magnitudes.
+        The unset knobs of :mod:`rippleb.simulator.mismatch` take their documented magnitudes.
     rebonded
         The gauges' installation errors are drawn anew (``re-assembled``;
         :mod:`rippleb.simulator.flexspline`).

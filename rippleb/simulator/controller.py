@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rippleb.data import JointSpec
-from rippleb.scenario import REFERENCE_TEMPERATURE_C
+from rippleb.simulator.scenario import REFERENCE_TEMPERATURE_C
 from rippleb.simulator import device as device_module
 from rippleb.simulator import joint
 from rippleb.simulator.encoder import IDEAL_PARAMS
@@ -80,7 +80,7 @@ def design_gains(spec: JointSpec, link_inertia: float, bandwidth_factor: float =
     """Pole placement on the rigid joint of link inertia ``link_inertia`` [kg m^2]: the
     bandwidth a third of the locked-motor resonance, at most ``2 pi control_rate / 20``.
 
-    ``bandwidth_factor`` (the ``[controller]`` table of :mod:`rippleb.mismatch`) scales the
+    ``bandwidth_factor`` (the ``[controller]`` table of :mod:`rippleb.simulator.mismatch`) scales the
     designed bandwidth before that cap: a stiffer (or softer) loop than the documented
     design, with the same damping ratio.
     """

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rippleb.errors import InputError
-from rippleb.scenario import REFERENCE_TEMPERATURE_C
+from rippleb.simulator.scenario import REFERENCE_TEMPERATURE_C
 from rippleb.simulator.conditions import stable_hash
 
 STRAIN_GAIN = 0.1            # V/Nm after the bridge amplifier; estimate, rated 51 Nm -> 5.1 V

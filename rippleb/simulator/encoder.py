@@ -101,7 +101,7 @@ def counts(theta: np.ndarray, counts_per_rev: int, errors: EncoderErrors | None)
 def missed_counts(encoder: np.ndarray, probability: float, seed: int, log_name: str) -> np.ndarray:
     """The DAQ counter losing each edge with ``probability``: the ``[faults]`` model of
     :func:`rippleb.simulator.sensors.encoder_faults`, in every session of the joint."""
-    from rippleb.scenario import Faults
+    from rippleb.simulator.scenario import Faults
     from rippleb.simulator.sensors import encoder_faults
 
     rng = stream(seed, "encoder-missed", log_name)

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rippleb.layouts import GaugeSettings, Layout, order_weights
-from rippleb.scenario import REFERENCE_TEMPERATURE_C
+from rippleb.simulator.scenario import REFERENCE_TEMPERATURE_C
 from rippleb.simulator.conditions import stream
 from rippleb.simulator.device import RIPPLE_ORDERS
 

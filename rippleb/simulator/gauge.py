@@ -3,7 +3,7 @@ bends with load and changes with the tooth flank, and a span that drifts with te
 
 The device's ripple (:meth:`~rippleb.simulator.device.Device.ripple`) is a Fourier series
 in the motor angle whose amplitudes are affine in ``|tau|``: exactly the model class of the
-angle-indexed methods. The knobs of :mod:`rippleb.mismatch` bend it where a real flexspline
+angle-indexed methods. The knobs of :mod:`rippleb.simulator.mismatch` bend it where a real flexspline
 does (``docs/physics.md``, "Beyond the methods' models"). With every knob off,
 :func:`wave_ripple` *is* ``device.ripple`` (the same call), so logs stay bit for bit.
 
@@ -20,7 +20,7 @@ from scipy import signal
 
 from rippleb.dsp import F8, IN_F8, compiled
 
-from rippleb.scenario import REFERENCE_TEMPERATURE_C
+from rippleb.simulator.scenario import REFERENCE_TEMPERATURE_C
 from rippleb.simulator.conditions import stream
 
 #: Damping ratio of the flexspline mode that filters the ripple. **Estimate**: a lightly
@@ -62,7 +62,7 @@ def wave_ripple(device, knobs, wave_angle: np.ndarray, torque: np.ndarray, spec)
     device
         The :class:`~rippleb.simulator.device.Device`; its ``ripple`` is the affine map.
     knobs
-        Resolved :class:`~rippleb.mismatch.Unmodelled`.
+        Resolved :class:`~rippleb.simulator.mismatch.Unmodelled`.
     wave_angle, torque
         True motor angle [rad] and shaft torque [Nm] per sample.
     spec

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rippleb.scenario import RippleSettings
+from rippleb.simulator.scenario import RippleSettings
 
 #: Orders of the output (circular-spline) angle and their nominal amplitudes
 #: ``(order, base [Nm], per Nm of |tau|)``. **Estimate**, see docs/physics.md.

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from rippleb.scenario import REFERENCE_TEMPERATURE_C, Scenario
-from rippleb.mismatch import Unmodelled
+from rippleb.simulator.scenario import REFERENCE_TEMPERATURE_C, Scenario
+from rippleb.simulator.mismatch import Unmodelled
 from rippleb.simulator import daq, gauge
 from rippleb.simulator.conditions import stream
 from rippleb.simulator.device import Device
@@ -34,7 +34,7 @@ def quantise(values: np.ndarray, full_scale: float, bits: int) -> np.ndarray:
     return codes * step
 
 
-#: The physics of today's bridge: every knob of :mod:`rippleb.mismatch` off.
+#: The physics of today's bridge: every knob of :mod:`rippleb.simulator.mismatch` off.
 IDEAL = Unmodelled().resolve(realistic=False)
 
 

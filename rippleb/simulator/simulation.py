@@ -29,9 +29,9 @@ import numpy as np
 
 from rippleb.data import JointSpec, SensorLog
 from rippleb.layouts import GaugeSettings
-from rippleb.scenario import Scenario, load_scenario
+from rippleb.simulator.scenario import Scenario, load_scenario
 from rippleb.simulator import conditions, controller
-from rippleb.mismatch import describe
+from rippleb.simulator.mismatch import describe
 from rippleb.simulator.conditions import DEFAULT_CONDITION, calibration_condition, check_condition, stable_hash
 from rippleb.simulator.device import Device, check_seed
 from rippleb.simulator.flexspline import channel_devices
@@ -93,7 +93,7 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     its calibration session; ``same-session`` is the device as calibrated. A scenario with
     ``scored = false`` (``calibration``) is that calibration session, the same under
     every deployment condition; ``realistic`` (the joint with the physics no method
-    models, :mod:`rippleb.mismatch`) acts on it too.
+    models, :mod:`rippleb.simulator.mismatch`) acts on it too.
     """
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     seed = check_seed(seed)
@@ -113,7 +113,7 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     nominal = load_table(sc, q_d, nominal_seed=seed)
     tau_ref = nominal.model_torque(q_d, trajectory[2]) + sc.external_torque(t, known_only=True)
     # the physics beyond the methods' models: the scenario's knobs, the rest at their
-    # documented magnitudes under `realistic`, off otherwise (rippleb/mismatch.py)
+    # documented magnitudes under `realistic`, off otherwise (rippleb/simulator/mismatch.py)
     knobs = sc.unmodelled.resolve(realistic=session.realistic)
     errors = EncoderErrors.draw(seed, knobs, spec.counts_per_rev)
     gains = controller.design_gains(spec, float(np.mean(nominal.inertia)), knobs.bandwidth_factor)

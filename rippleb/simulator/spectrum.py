@@ -111,7 +111,7 @@ def _amplitudes(values: np.ndarray, theta: np.ndarray, orders) -> np.ndarray:
 
 def case_bands(seed: int, scenario, condition: str = "same-session", bands=SPEED_BANDS) -> np.ndarray:
     """``(len(bands), len(ORDERS))``: the band amplitudes [V] of the device of ``seed`` on
-    ``scenario`` (a name or a :class:`~rippleb.scenario.Scenario`) under ``condition``."""
+    ``scenario`` (a name or a :class:`~rippleb.simulator.scenario.Scenario`) under ``condition``."""
     from rippleb.simulator.simulation import simulate
 
     return order_windows(simulate(scenario, seed, condition).log).bands(bands)

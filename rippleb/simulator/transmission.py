@@ -32,7 +32,7 @@ peak over an output revolution in its standard class, 1.5e-4 rad in its special 
 That figure bounds the sum of the components; how a drive splits it is an **estimate**
 held to the paper's Fig. 2 (:mod:`rippleb.simulator.spectrum`), and each device's error is a
 random fraction of its class, as real drives sit below their rating. ``A4``, ``l``, ``k``
-and the damping ``c`` are the ``[gear]`` knobs of :mod:`rippleb.mismatch` (off but under
+and the damping ``c`` are the ``[gear]`` knobs of :mod:`rippleb.simulator.mismatch` (off but under
 ``realistic``).
 """
 
@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rippleb.scenario_types import ORDER2_SHARE, TRANSMISSION_ERROR_PP
+from rippleb.simulator.scenario_types import ORDER2_SHARE, TRANSMISSION_ERROR_PP
 from rippleb.simulator import joint
 from rippleb.simulator.conditions import stable_hash, stream
 
@@ -50,7 +50,7 @@ from rippleb.simulator.conditions import stable_hash, stream
 #: components take. **Estimate**: the sources rank the components (twice per turn, then
 #: output-locked, then once per turn) but give no split valid for every drive. The twice-per-
 #: turn share is the scenario's (``[gear] order2_share``, ``ORDER2_SHARE`` of
-#: :mod:`rippleb.scenario_types`); up to 0.5 of it, the worst-case sum meets the class.
+#: :mod:`rippleb.simulator.scenario_types`); up to 0.5 of it, the worst-case sum meets the class.
 SHARES = {"wg1": 0.2, "output": 0.3}
 #: A device's error as a fraction of its class's limit, uniform. **Estimate**: a rating is
 #: a bound every unit meets, so units spread below it.
@@ -88,7 +88,7 @@ class TransmissionError:
         to peak], ``order2_share`` of it twice per turn.
 
         The WG-locked terms beyond the kinematic error (``[gear]`` knobs of
-        :mod:`rippleb.mismatch`): ``order4`` the order-4 amplitude in multiples of the
+        :mod:`rippleb.simulator.mismatch`): ``order4`` the order-4 amplitude in multiples of the
         order-2 one, ``load`` the growth of the order-2 amplitude at ``rated_torque`` [Nm]
         (relative), ``compliance`` the relative variation of the flexspline's compliance
         at twice the wave-generator angle.

@@ -62,7 +62,7 @@ def check_bounds(scenario, model) -> None:
     Parameters
     ----------
     scenario
-        A parsed :class:`~rippleb.scenario.Scenario`.
+        A parsed :class:`~rippleb.simulator.scenario.Scenario`.
     model
         The Pinocchio model of its robot (:func:`rippleb.simulator.robot.load_model`).
 

@@ -20,7 +20,7 @@ physics lives in :mod:`rippleb.simulator.gauge`, :mod:`rippleb.simulator.daq`,
 
 Examples
 --------
->>> from rippleb.mismatch import Unmodelled
+>>> from rippleb.simulator.mismatch import Unmodelled
 >>> Unmodelled().resolve(realistic=False).active
 False
 >>> Unmodelled().resolve(realistic=True).antialias_hz

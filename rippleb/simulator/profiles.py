@@ -1,6 +1,6 @@
 """Time profiles of a scenario: the joint trajectory's segments and the external loads.
 
-Both are evaluated analytically at any times ``t``; :mod:`rippleb.scenario` reads them
+Both are evaluated analytically at any times ``t``; :mod:`rippleb.simulator.scenario` reads them
 from a file and checks them. ``docs/scenarios.md`` describes them.
 """
 

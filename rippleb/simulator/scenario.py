@@ -6,11 +6,11 @@ act on it, at which temperature, and which time window is scored. The file name 
 scenario's name. ``docs/scenarios.md`` describes the format and every built-in.
 
 This module reads and checks the files (:class:`Parser`); what they are read into,
-:class:`Scenario` and its defaults, is :mod:`rippleb.scenario_types`, re-exported here.
+:class:`Scenario` and its defaults, is :mod:`rippleb.simulator.scenario_types`, re-exported here.
 
 Examples
 --------
->>> from rippleb.scenario import load_scenario
+>>> from rippleb.simulator.scenario import load_scenario
 >>> sc = load_scenario("paper-quintic")
 >>> sc.name, sc.scored, round(sc.duration, 2)
 ('paper-quintic', True, 4.0)
@@ -29,9 +29,9 @@ from rippleb.data import MAX_TORQUE_FACTOR, JointSpec
 from rippleb.reading import check_joint_value
 from rippleb.errors import InputError
 from rippleb.layouts import GAUGE_KEYS, parse_gauges
-from rippleb.mismatch import TABLES as _UNMODELLED_TABLES, parse_tables
-from rippleb.profiles import DEFAULT_RISE, Load, Segment, evaluate_segments  # noqa: F401 (re-exported)
-from rippleb.scenario_types import (DEFAULT_JOINT, DEFAULT_ROBOT, DEFAULT_TEMPERATURE_C,  # noqa: F401 (re-exported)
+from rippleb.simulator.mismatch import TABLES as _UNMODELLED_TABLES, parse_tables
+from rippleb.simulator.profiles import DEFAULT_RISE, Load, Segment, evaluate_segments  # noqa: F401 (re-exported)
+from rippleb.simulator.scenario_types import (DEFAULT_JOINT, DEFAULT_ROBOT, DEFAULT_TEMPERATURE_C,  # noqa: F401 (re-exported)
                                     HYSTERESIS_NM, REFERENCE_TEMPERATURE_C, RIPPLE_TEMP_COEFF, Faults,
                                     ORDER2_SHARE, TRANSMISSION_ERROR_PP, RippleSettings, Scenario)
 
@@ -46,7 +46,7 @@ _TOP_KEYS = {"description": (str,), "scored": (bool,), "duration": _NUMBER,
              "ripple": (dict,), "gear": (dict,), "gauges": (dict,), **{table: (dict,) for table in _UNMODELLED_TABLES}}
 _RIPPLE_KEYS = {"output_scale": _NUMBER, "hysteresis_nm": _NUMBER, "temperature_coeff": _NUMBER,
                 "drift": _NUMBER}
-#: The [gear] keys that act in every condition; the table's knobs are :mod:`rippleb.mismatch`'s.
+#: The [gear] keys that act in every condition; the table's knobs are :mod:`rippleb.simulator.mismatch`'s.
 _GEAR_KEYS = {"transmission_error": _NUMBER, "order2_share": _NUMBER}
 #: Largest transmission-error class accepted [rad peak to peak]: 3.4 arcmin, above every
 #: class of the CSF catalogue (1 arcmin standard).

@@ -1,6 +1,6 @@
 """What a scenario is: :class:`Scenario` and its tables, with the physical defaults.
 
-Read from a TOML file by :mod:`rippleb.scenario` (``load_scenario``), which also
+Read from a TOML file by :mod:`rippleb.simulator.scenario` (``load_scenario``), which also
 re-exports every name here; the simulator takes them from there.
 """
 
@@ -14,8 +14,8 @@ import numpy as np
 from rippleb.data import JointSpec
 from rippleb.errors import InputError
 from rippleb.layouts import GaugeSettings
-from rippleb.mismatch import Unmodelled
-from rippleb.profiles import Load, Segment, evaluate_segments
+from rippleb.simulator.mismatch import Unmodelled
+from rippleb.simulator.profiles import Load, Segment, evaluate_segments
 
 
 #: Defaults: the paper's joint (UR5 shoulder lift stands in for its arm) at a warm
@@ -141,7 +141,7 @@ class Scenario:
         (:class:`RippleSettings`); the documented defaults.
     unmodelled
         The physics beyond the methods' models that the scenario switches on
-        (:class:`~rippleb.mismatch.Unmodelled`; tables ``[mismatch]``, ``[thermal]``,
+        (:class:`~rippleb.simulator.mismatch.Unmodelled`; tables ``[mismatch]``, ``[thermal]``,
         ``[daq]``, ``[encoder]``, ``[controller]``); none by default.
     transmission_error
         The drive's transmission-error class [rad peak to peak] (``[gear]

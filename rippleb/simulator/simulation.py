@@ -23,7 +23,8 @@ against ``tau / N``, the friction opposing the motor velocity, and cogging.
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+import functools
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -67,7 +68,9 @@ class Simulation:
         What that error adds to ``torque_true`` [Nm]: :func:`gear_torque`, the real torque
         of this joint minus that of the same joint with an ideal gear, both read through a
         fine encoder (zero when the error is off; None for an unscored session, the
-        calibration, where no row is scored).
+        calibration, where no row is scored). Computed when first read: the pair is two
+        more integrations of the joint, which a caller that never scores the session (a
+        figure, a spectrum, a physics test of the log) does not pay for.
     gauges
         Per amplifier channel of the gauge layout, the device as that channel reads it (its
         ripple terms are the channel's; :mod:`rippleb.simulator.flexspline`): ``gauges[0]``
@@ -82,8 +85,16 @@ class Simulation:
     scenario: Scenario
     device: Device
     gear: TransmissionError = IDEAL_GEAR
-    torque_gear: np.ndarray | None = None
     gauges: tuple = ()
+    #: How to compute ``torque_gear`` (:func:`gear_torque` with this session's loop), or None.
+    gear_pair: functools.partial | None = field(default=None, repr=False)
+    _torque_gear: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def torque_gear(self) -> np.ndarray | None:
+        if self._torque_gear is None and self.gear_pair is not None:
+            object.__setattr__(self, "_torque_gear", self.gear_pair())   # once, then kept
+        return self._torque_gear
 
 
 def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_CONDITION) -> Simulation:
@@ -128,11 +139,10 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     # What the gear's error adds to the real torque (the metrics' gear columns; never
     # streamed to a method). Only for a scored session: no row is scored on the
     # calibration log, and its twin runs would be the longest integrations of every case.
-    if not sc.scored:
-        torque_gear = None
-    elif gear.active:
-        torque_gear = gear_torque(loop, gear, **drive)
-    else:
+    gear_pair, torque_gear = None, None
+    if sc.scored and gear.active:
+        gear_pair = functools.partial(gear_torque, loop, gear, **drive)
+    elif sc.scored:
         torque_gear = np.zeros(n)
 
     gauges = tuple(channel_devices(device, sc.gauges, sc.temperature_c, session.rebonded))
@@ -168,7 +178,8 @@ def simulate(scenario: Scenario | str, seed: int = 0, condition: str = DEFAULT_C
     start, stop = sc.evaluation
     return Simulation(log=log, moving=np.abs(qd_d) > 1e-12, wave_angle=theta_m,
                       joint_velocity=qd, eval_mask=(t >= start) & (t <= stop),
-                      scenario=sc, device=device, gear=gear, torque_gear=torque_gear, gauges=gauges)
+                      scenario=sc, device=device, gear=gear, gauges=gauges,
+                      gear_pair=gear_pair, _torque_gear=torque_gear)
 
 
 #: Encoder counts per motor revolution of the pair :func:`gear_torque` compares: so fine

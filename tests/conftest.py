@@ -44,6 +44,10 @@ settings.load_profile("rippleb")
 def pytest_addoption(parser):
     parser.addoption("--full", action="store_true",
                      help="also run the tests marked slow (the full suite, as CI runs it)")
+    parser.addoption("--heavy", action="store_true",
+                     help="with --full, also the tests marked heavy: the longest end-to-end runs, which "
+                          "CI's 20 minutes on 2 cores cannot hold beside the rest (docs/architecture.md, "
+                          "'Tests')")
     parser.addoption("--fake-cpu", choices=[*sorted(FAKE_CPUS), "other"],
                      help="describe this host as a CPU of that kind (other: the kind it is not) to "
                           "every test and the rippleb processes it starts (sets RIPPLEB_FAKE_CPU; "
@@ -79,6 +83,10 @@ def _check_numerics():
 
 
 def pytest_collection_modifyitems(config, items):
+    heavy = [item for item in items if item.get_closest_marker("heavy")]
+    if heavy and not (config.getoption("--heavy") or config.option.markexpr):
+        config.hook.pytest_deselected(items=heavy)
+        items[:] = [item for item in items if not item.get_closest_marker("heavy")]
     if config.getoption("--full") or config.option.markexpr:
         # The slow tests first (stable: files keep their order): xdist hands out single
         # tests in collection order, so a slow test collected late would run alone at

@@ -142,6 +142,7 @@ def test_sigint_then_resume(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_non_editable_install_lists_builtins(tmp_path):
     target = tmp_path / "site"
     proc = subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps",

@@ -57,6 +57,7 @@ def test_run_and_sweep_on_a_cluster_equal_a_local_run(cluster, tmp_path):
     assert a["rms_error_nm"].nunique() == 2
 
 
+@pytest.mark.heavy
 def test_a_worker_killed_mid_run_loses_no_row(cluster, tmp_path):
     out = tmp_path / "run"
     args = [str(BIN / "rippleb"), "run", "--methods", "angle-adaptive,kalman-ripple,lowpass",
@@ -85,6 +86,7 @@ def test_a_worker_killed_mid_run_loses_no_row(cluster, tmp_path):
     assert cluster.workers[0].poll() is not None
     assert "Remove worker" in (cluster.tmp / "scheduler.log").read_text()
 
+@pytest.mark.heavy
 def test_a_scheduler_killed_mid_run_is_one_line_and_the_run_resumable(tmp_path):
     """Before: a ``RuntimeError: ConnectionPool is closed`` traceback and exit 1 (issue 25)."""
     own = Cluster(tmp_path, n=2)   # its own: the module's cluster serves the other tests

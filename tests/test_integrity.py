@@ -267,6 +267,7 @@ def test_where_the_cache_is_writable_a_rewrite_fails_the_rows_it_tampered(tmp_pa
         assert "SHA-256 mismatch" in frame.loc[method, "message"]
 
 
+@pytest.mark.heavy
 def test_a_plugin_that_hangs_or_exits_at_import_delays_only_itself(site, tmp_path):
     # A healthy plugin imports in milliseconds in its forked child: 10 s is out of reach of
     # a loaded host, and the hanging import (an hour) is bounded by it; the subprocess's own

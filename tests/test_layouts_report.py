@@ -65,6 +65,7 @@ def test_a_layout_is_written_by_name_in_a_sweep_and_held_as_its_position():
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_the_section_comes_from_the_cli_at_small_scale(tmp_path):
     """rippleb sweep over two layouts, then rippleb report: the section's numbers are the
     rows' (mean over the scenarios per device, then over devices)."""

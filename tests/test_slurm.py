@@ -55,6 +55,7 @@ def _alive(pid: int) -> bool:
     return True
 
 
+@pytest.mark.heavy
 def test_the_documented_slurm_cluster_runs_rows_equal_to_a_local_run(tmp_path):
     env = _fake_slurm(tmp_path)
     cluster = subprocess.Popen(

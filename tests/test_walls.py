@@ -313,7 +313,7 @@ def _skip_without_walls():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("executor", ["local", "dask"])
+@pytest.mark.parametrize("executor", ["local", pytest.param("dask", marks=pytest.mark.heavy)])
 def test_a_method_reads_only_what_it_is_handed_and_reaches_no_network(site, tmp_path, executor):
     """The issue's last row and its Dask row: the run directory, the key, ``$HOME``, ``/etc``,
     the exported secret (in the environment and anywhere in memory), a port on 127.0.0.1, a
@@ -337,6 +337,7 @@ def test_a_method_reads_only_what_it_is_handed_and_reaches_no_network(site, tmp_
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_on_a_scheduler_started_by_hand_a_method_cannot_reach_it(site, tmp_path, monkeypatch):
     """The issue's first row: ``--scheduler`` on a real ``dask scheduler`` and two ``dask
     worker`` processes (the plugin installed where they run); the prober tries
@@ -413,7 +414,7 @@ def test_a_method_cannot_read_the_recording_it_is_scored_on(site, tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("given", ["file", "stdin"])
+@pytest.mark.parametrize("given", ["file", pytest.param("stdin", marks=pytest.mark.heavy)])
 def test_a_resumed_sealed_run_hides_the_salt_its_file_and_every_copy(site, tmp_path, given):
     """The issue's third row: ``--resume --salt-file FILE``, the salt on stdin, and a copy of it
     in the working directory and in ``$HOME``."""
@@ -441,6 +442,7 @@ def test_a_resumed_sealed_run_hides_the_salt_its_file_and_every_copy(site, tmp_p
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_check_ends_a_hanging_check_at_its_limit_names_it_and_runs_the_rest(site, tmp_path):
     proc = _cli(tmp_path, site, "check", "hanger", "--timeout", "20")
     assert proc.returncode == 1, proc.stdout + proc.stderr
@@ -462,6 +464,7 @@ def test_check_names_the_check_a_method_ends_its_process_in(site, tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_a_tuning_point_that_hangs_or_exits_costs_its_own_point(site, monkeypatch):
     """The issue's tune row: each point a sandboxed row under the limits; the record is kept."""
     from rippleb.engine.tuner import plan, tune
@@ -499,6 +502,7 @@ def test_a_method_cannot_forge_its_timing_nor_pass_integers_as_torque(site, tmp_
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_a_fitted_state_is_counted_against_the_memory_limit_not_held_by_the_runner(site, tmp_path):
     """The issue's 900 MB fitted state that cost the runner 3 GB: the runner now receives it
     into a file; beyond --memory-limit the fit fails, and the rows beside it run."""

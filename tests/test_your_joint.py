@@ -147,6 +147,7 @@ def _cli(*args, cwd: Path) -> subprocess.CompletedProcess:
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_the_walk_of_docs_your_joint(tmp_path):
     """docs/your-joint.md's numbers are what its walk prints today: the script runs every command
     of the page (lab logs of both kinds of reference to rankings, the refusals) and compares."""
@@ -156,6 +157,7 @@ def test_the_walk_of_docs_your_joint(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_a_lab_log_reads_as_the_same_log_in_rippleb_columns_through_python(tmp_path):
     """The lab log through its joint file, and the same log in rippleb's columns read from Python
     with JointSpec(counts_per_rev=4096), give the same numbers."""

@@ -26,6 +26,7 @@ def test_list_names_each_method_with_its_source():
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_run_scores_each_method_below_raw_and_through_a_power_cycle(tmp_path):
     out = tmp_path / "run"
     proc = rippleb("run", "--methods", ",".join(["raw", *NEW]), "--scenarios", "paper-quintic",

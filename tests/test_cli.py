@@ -111,6 +111,7 @@ def test_bad_recorded_log_names_the_column(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_sigint_then_resume(tmp_path):
     out = tmp_path / "run"
     args = [sys.executable, "-m", "rippleb", "run", "--methods", "raw,lowpass,current-based,order-tracking",

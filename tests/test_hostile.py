@@ -363,7 +363,7 @@ def test_a_resumed_sealed_run_keeps_the_walls_and_the_salt(breaker_site, tmp_pat
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("executor", ["local", "dask"])
+@pytest.mark.parametrize("executor", ["local", pytest.param("dask", marks=pytest.mark.heavy)])
 def test_the_walls_hold_as_root_and_on_dask(breaker_site, tmp_path, executor):
     from rippleb.engine.process.sandbox import missing_protections
 

@@ -125,6 +125,7 @@ def test_installed_plugins_are_listed_with_their_origin(site):
     assert "builtin" in lines["raw"]
 
 
+@pytest.mark.heavy
 def test_misbehaving_plugins_get_their_status_and_the_others_complete(site, tmp_path):
     out = tmp_path / "run"
     proc = rippleb(site, "run", "--methods", "median,raises,nans,short,sleeps,chatty,broken-one,raw",
@@ -162,6 +163,7 @@ def test_a_plugin_named_like_a_builtin_is_a_clear_error(tmp_path):
     assert "rippleb-clash" in proc.stderr and "Traceback" not in proc.stderr
 
 
+@pytest.mark.heavy
 def test_the_example_plugins_own_tests_pass(site, tmp_path):
     """As its author runs them: pytest in the plugin's directory, the plugin installed."""
     package = tmp_path / "rippleb-median"
@@ -182,6 +184,7 @@ def test_rippleb_check_passes_the_readme_plugin_and_fails_a_misbehaving_one(site
     assert "  FAIL  output" in bad.stdout and "  skip  causality" in bad.stdout
 
 
+@pytest.mark.heavy
 def test_variants_of_a_plugin_run_with_their_parameters_checked_in_a_child(site, tmp_path):
     refused = rippleb(site, "run", "--methods", "median[size=3]", "--scenarios", "static-contact",
                       "--seeds", "1", "--out", tmp_path / "refused", "--no-progress")

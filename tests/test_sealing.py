@@ -303,7 +303,8 @@ def test_the_salt_never_reaches_a_method_process(tmp_path, monkeypatch, register
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("design", ["simulations-through-the-fork-server", "salt-drawn-before-the-fork"])
+@pytest.mark.parametrize("design", ["simulations-through-the-fork-server",
+                                    pytest.param("salt-drawn-before-the-fork", marks=pytest.mark.heavy)])
 def test_the_seeker_finds_what_a_naive_design_would_leak(tmp_path, monkeypatch, register_methods, design):
     """Why the salt is drawn after the fork server started and the sealed simulations are
     forked from the runner: either way round, a row finds it. A salt drawn before the fork

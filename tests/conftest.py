@@ -24,6 +24,10 @@ ONE_WORKER_FILES = {
     "test_kalman_ripple.py",  # fitted filters
     "test_order_tracking.py", # simulations and scores cached per process
     "test_plugins.py",        # the plugins installed once
+    "test_publication.py",    # `published`: one sealed run and its report
+    "test_hostile.py",        # `finished` and the hostile sites: one run, one install
+    "test_integrity.py",      # the hostile site installed once
+    "test_walls.py",          # the walls' site installed once
 }
 
 

@@ -103,6 +103,7 @@ def fake(monkeypatch, register_methods):
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_misbehaving_methods_get_their_status_and_the_others_complete(fake, tmp_path):
     names = [c.name for c in ALL] + ["raw"]
     # the sleeper's rows cost the timeout; every other row takes about a second at most

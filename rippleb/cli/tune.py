@@ -90,7 +90,7 @@ def cmd_tune(args) -> int:
             record["methods"][name] = entry
             if args.out is not None:
                 _write(args.out, record)
-            bar.write(line(name, entry, args.out))
+            bar.write(line(name, entry, args.out, args.rule))
 
         tune(planned, seeds, args.jobs, on_method=finished, on_point=bar.update, rule=args.rule)
     if args.out is not None:
@@ -109,21 +109,24 @@ def compare(args) -> int:
     return 0
 
 
-def line(name: str, entry: dict, out: Path | None = None) -> str:
-    """One method's result as one line, ending with how to run what the rule adopted: the
-    variant's exact ``--methods`` item, or ``--tuning`` with the record ``out``."""
+def line(name: str, entry: dict, out: Path | None = None, rule: str = PROTOCOL_RULE) -> str:
+    """One method's result as one line, in the words of ``rule``, ending with how to run what
+    it adopted: the variant's exact ``--methods`` item, or ``--tuning`` with the record ``out``."""
     from rippleb.variants import label
 
     if entry["evaluations"] == 1:
         return f"{name}: {entry['default_score']:.3f} Nm at its defaults; {entry['note']}"
+    every = rule == "every-device"
     if not entry["replaced"]:
-        verdict = "default kept" + (" (no point beats it by the rule)" if entry["best"] != entry["default"]
-                                    else " (the best point is the default)")
+        verdict = "default kept" + ("" if entry["best"] == entry["default"] else
+                                    " (the best point is not better on every device)" if every else
+                                    " (no point is lower by the paired test)")
     else:
         how = f" or --tuning {out}" if out is not None else " (or write the record with --out FILE and pass --tuning FILE)"
-        which = ("the best point replaces the default" if entry["adopted"] == entry["best"] else
-                 f"{', '.join(f'{k}={v:g}' for k, v in entry['adopted'].items())} replaces the default "
-                 f"(the best point does not pass the rule)")
+        which = ("better on every tuning device, adopted" if every else
+                 "lower by the paired test, adopted" if entry["adopted"] == entry["best"] else
+                 f"{', '.join(f'{k}={v:g}' for k, v in entry['adopted'].items())} adopted (the best point "
+                 f"is not lower by the paired test)")
         verdict = (f"{which}; its constructor's default is unchanged: run it with "
                    f"--methods '{label(name, entry['adopted'])}'{how}")
     best = ", ".join(f"{k}={v:g}" for k, v in entry["best"].items())

@@ -254,6 +254,7 @@ MAX_DELAY_S = 2.5
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_interrupts_at_random_moments_end_every_run_cleanly():
     rng = random.Random(25)
     plan = [(rng.uniform(0.0, MAX_DELAY_S), rng.choice(signal_trials.MODES), i % 8 == 0) for i in range(TRIALS)]

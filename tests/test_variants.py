@@ -148,6 +148,7 @@ def test_the_cli_refuses_a_bad_parameter_in_one_line_before_the_run(tmp_path, me
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_two_variants_run_resume_and_are_named_in_the_report(tmp_path):
     out = tmp_path / "run"
     proc = rippleb("run", "--methods", "order-tracking[q=20,30]", "--scenarios", "paper-quintic",

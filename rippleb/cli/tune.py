@@ -16,7 +16,8 @@ import sys
 from pathlib import Path
 
 from rippleb.errors import InputError
-from rippleb.tuning import BUDGET, CRITERION, PAIRED_SEEDS, PROTOCOL_RULE, RULE_ID, RULES, SEED, SEEDS
+from rippleb.tuning import (BUDGET, CRITERION, EVERY_DEVICE, PAIRED_SEEDS, PROTOCOL_RULE, RULE_ID, RULES, SEED,
+                             SEEDS)
 
 #: The largest ``--budget``: 1024 points a method (64 times the protocol's 16), each fitted
 #: and run on every tuning device, is hours of CPU a method; ``--budget 1000000`` was
@@ -46,7 +47,7 @@ def add_tune(sub) -> None:
     p.add_argument("--rule", choices=sorted(RULES), default=PROTOCOL_RULE,
                    help=f"the adoption rule (default {PROTOCOL_RULE}, the built-ins' record's): {RULE_ID}: "
                         f"{RULES[RULE_ID]} (needs 20 devices, e.g. --seeds {PAIRED_SEEDS[0]}-{PAIRED_SEEDS[-1]}); "
-                        f"every-device: {RULES['every-device']}")
+                        f"{EVERY_DEVICE}: {RULES[EVERY_DEVICE]}")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--compare", nargs=2, type=Path, metavar=("A.json", "B.json"),
                    help="tune nothing: print the stability table of two records made on disjoint sets of "
@@ -116,7 +117,7 @@ def line(name: str, entry: dict, out: Path | None = None, rule: str = PROTOCOL_R
 
     if entry["evaluations"] == 1:
         return f"{name}: {entry['default_score']:.3f} Nm at its defaults; {entry['note']}"
-    every = rule == "every-device"
+    every = rule == EVERY_DEVICE
     if not entry["replaced"]:
         verdict = "default kept" + ("" if entry["best"] == entry["default"] else
                                     " (the best point is not better on every device)" if every else

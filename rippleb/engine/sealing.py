@@ -259,12 +259,18 @@ def redact(argv: list[str]) -> list[str]:
 # ----------------------------------------------------------------------------- the report
 
 
+def sealed_rows(frame) -> int:
+    """How many of ``frame``'s rows ran on devices drawn from a secret salt."""
+    if SEALED_COLUMN not in frame:
+        return 0
+    return int((frame[SEALED_COLUMN].astype(str).str.lower() == "true").sum())
+
+
 def sealed_text(frame, run: dict) -> str:
     """The report's sentence on whether its rows were sealed (``run`` is what
     ``run.json`` and ``provenance.json`` recorded)."""
     n = len(frame)
-    flags = (frame[SEALED_COLUMN].astype(str).str.lower() == "true") if SEALED_COLUMN in frame else None
-    sealed = 0 if flags is None else int(flags.sum())
+    sealed = sealed_rows(frame)
     if sealed == 0:
         return ("Not sealed: these devices are those of the public seeds, which a method could "
                 "re-simulate to read off the truth; a comparison that matters runs sealed "

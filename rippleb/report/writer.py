@@ -27,7 +27,7 @@ from rippleb.report.provenance import (collect_provenance, environment_sentence,
 from rippleb.scoring.metrics import METRIC_COLUMNS
 from rippleb.scoring.truthfree import TRUTH_FREE_COLUMNS
 from rippleb.engine.results import RunWarning, copy_rows, row_key, swept_columns
-from rippleb.engine.sealing import sealed_text
+from rippleb.engine.sealing import sealed_rows, sealed_text
 from rippleb.report.publication import SALT_NAME, compare_rows, read_results_exact  # noqa: F401 - re-exported
 from rippleb.report.sections import READING_RECORDED, READING_SIMULATED, conditions_note, summary_sections  # noqa: F401
 from rippleb.report.tuning_table import tuning_markdown
@@ -273,7 +273,7 @@ def _write_report(run_dir: Path, out: Path, frame, *, figures, figure_seed, argv
         seeds = sorted(int(s) for s in frame["seed"].unique())
         drawn, figure_warnings = figs.draw_all(frame, out / "figures", seed=figure_seed, fmt=figure_format,
                                         speed_seeds=seeds[:speed_seeds] if speed_seeds else seeds,
-                                        keep=signals, sealed=not prov["sealed"].startswith("Not sealed"))
+                                        keep=signals, sealed=sealed_rows(frame) > 0)
         warnings += figure_warnings
     prov["figure_seed"] = figure_seed if figures else None
     # A byte copy, not a rewrite: re-printing parsed floats could change their last digit,

@@ -1,5 +1,6 @@
 """End to end through the real command (``python -m rippleb`` in a subprocess)."""
 
+import argparse
 import os
 import signal
 import subprocess
@@ -20,9 +21,14 @@ def rippleb(*args, cwd=None, env=None, timeout=300):
 
 
 def test_help_of_every_command():
-    for command in ([], ["list"], ["run"], ["simulate"], ["report"]):
+    from rippleb.cli.program import build_parser
+
+    commands = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)).choices
+    for command in ([], *([name] for name in commands)):
         proc = rippleb(*command, "--help")
-        assert proc.returncode == 0 and "usage: rippleb" in proc.stdout
+        assert proc.returncode == 0 and "usage: rippleb" in proc.stdout, (command, proc.stderr)
+        # argparse %-formats help: a bare % once printed an option's whole dictionary
+        assert "option_strings" not in proc.stdout and "%%" not in proc.stdout, command
 
 
 def test_report_help_prints_percent_signs_once():

@@ -25,6 +25,12 @@ from rippleb.tuning import (BUDGET, CRITERION, EVERY_DEVICE, PAIRED_SEEDS, PROTO
 MAX_BUDGET = 1024
 
 
+def _help_text(text: str) -> str:
+    """``text`` as an argparse help string: argparse %-formats help, so a bare ``%`` (the
+    rule's "5 %") printed the option's whole dictionary in ``--help``."""
+    return text.replace("%", "%%")
+
+
 def add_tune(sub) -> None:
     p = sub.add_parser(
         "tune", help="tune methods by the one protocol: same budget, calibration scenario only",
@@ -46,8 +52,8 @@ def add_tune(sub) -> None:
                                             "'rippleb run --tuning FILE' runs the adopted points")
     p.add_argument("--rule", choices=sorted(RULES), default=PROTOCOL_RULE,
                    help=f"the adoption rule (default {PROTOCOL_RULE}, the built-ins' record's): {RULE_ID}: "
-                        f"{RULES[RULE_ID]} (needs 20 devices, e.g. --seeds {PAIRED_SEEDS[0]}-{PAIRED_SEEDS[-1]}); "
-                        f"{EVERY_DEVICE}: {RULES[EVERY_DEVICE]}")
+                        f"{_help_text(RULES[RULE_ID])} (needs 20 devices, e.g. --seeds {PAIRED_SEEDS[0]}-{PAIRED_SEEDS[-1]}); "
+                        f"{EVERY_DEVICE}: {_help_text(RULES[EVERY_DEVICE])}")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--compare", nargs=2, type=Path, metavar=("A.json", "B.json"),
                    help="tune nothing: print the stability table of two records made on disjoint sets of "

@@ -129,6 +129,10 @@ def seal_config(config: dict, nonce: str | None = None) -> dict:
     where no key can be made (a read-only home: the run still runs, unverifiable)."""
     secret = key(create=True)
     if secret is None:
+        # said when the run starts, not only when a --resume is refused for it
+        warnings.warn(IntegrityWarning(
+            f"no key could be read or written at {key_path()}: this run's rows get no keyed hash, so "
+            f"'rippleb run --resume' will refuse it; set {KEY_ENV} to a file you can write"), stacklevel=2)
         return {k: v for k, v in config.items() if k != "integrity"}
     nonce = nonce or secrets.token_hex(16)
     return {**config, "integrity": {"scheme": SCHEME, "key": key_id(secret), "nonce": nonce,

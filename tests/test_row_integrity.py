@@ -120,3 +120,16 @@ def test_another_users_key_cannot_verify_and_says_so(finished, tmp_path):
     assert report.returncode == 0, report.stderr
     assert "made with another rippleb key" in report.stderr and "cannot be verified here" in report.stderr
     assert len(pd.read_csv(tmp_path / "rep" / "results.csv")) == 4   # kept, as before MACs existed
+
+
+def test_a_run_that_can_make_no_key_says_so_when_it_starts(tmp_path):
+    """A home nobody can write (uid 65534's ``/nonexistent``): the run still runs, and says at
+    once that it cannot be resumed and how to give it a key, not first when ``--resume`` refuses."""
+    (tmp_path / "file").write_text("")
+    proc = _cli(tmp_path, "run", "--methods", "raw", "--scenarios", "static-contact", "--seeds", "1",
+                "--no-progress", "--out", "run", key="file/key")      # a key below a file: never writable
+    assert proc.returncode == 0, proc.stderr
+    assert "rippleb: warning: no key could be read or written at" in proc.stderr
+    assert "RIPPLEB_KEY_FILE" in proc.stderr
+    resumed = _cli(tmp_path, "run", "--resume", "run", "--no-progress", key="file/key")
+    assert resumed.returncode == 2 and "has no integrity field" in resumed.stderr

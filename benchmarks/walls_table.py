@@ -167,6 +167,55 @@ def case_fat(where: Path, site: Path, limit: str) -> tuple[str, int, str]:
             f"{proc.stdout.strip()} (statuses, messages, the runner's peak RSS in MB)")
 
 
+def _nobodys(where: Path, site: Path) -> Path:
+    """``where`` and a copy of the plugin's ``site`` in it, given to uid 65534 (the original
+    is the runner's temporary directory, which only root may read)."""
+    import os
+
+    shutil.copytree(site, where / "site")
+    for path in [where, *where.rglob("*")]:
+        os.chown(path, 65534, 65534)
+    return where / "site"
+
+
+def case_nobody(where: Path, site: Path) -> tuple[str, int, str]:
+    """The prober run by uid 65534, whose home (``/nonexistent``) cannot be written."""
+    site = _nobodys(where, site)
+    listener = Listener()
+    try:
+        method = _label(run_dir=str(where / "run"), port=listener.port)
+        proc = _cli(where, site, "run", "--methods", f"raw,{method}", *RUN, "--jobs", "2", "--out", "run",
+                    user=65534, env={"HOME": "/nonexistent", "TMPDIR": str(where)})
+    finally:
+        listener.close()
+    warned = [line for line in proc.stderr.splitlines() if "warning" in line]
+    return ("`setpriv --reuid=65534 ... rippleb run --methods raw,prober[...]` (`HOME=/nonexistent`)", proc.returncode,
+            f"{_reached(_probe(where / 'run'))}; the listener received {len(listener.received)} connection(s); "
+            f"warnings: {len(warned)}; rows: {_rows_text(where / 'run')}")
+
+
+def case_no_key(where: Path, site: Path) -> tuple[str, int, str]:
+    """uid 65534 with no writable home and no ``RIPPLEB_KEY_FILE``: a run, then its resume."""
+    site = _nobodys(where, site)
+    env = {"HOME": "/nonexistent", "TMPDIR": str(where), "RIPPLEB_KEY_FILE": ""}
+    first = _cli(where, site, "run", "--methods", "raw", *RUN, "--out", "run", user=65534, env=env)
+    resumed = _cli(where, site, "run", "--resume", "run", "--no-progress", user=65534, env=env)
+    said = [line for line in first.stderr.splitlines() if line.startswith("rippleb: warning")]
+    return ("`setpriv --reuid=65534 ... rippleb run --methods raw ...`, then `rippleb run --resume run` "
+            "(`HOME=/nonexistent`, no `RIPPLEB_KEY_FILE`)", f"{first.returncode}, {resumed.returncode}",
+            f"the run: `{said[0] if said else 'no warning'}`; the resume: `{resumed.stderr.strip()[:160]}`")
+
+
+def case_tune_stopped(where: Path, site: Path, how: str) -> tuple[str, int, str]:
+    import signal
+
+    from support import stopped_tune
+
+    code, ended, family, left = stopped_tune(where, signal.SIGINT if how == "sigint" else signal.SIGKILL)
+    return (f"`rippleb tune --methods order-tracking --seeds 100-104 --jobs 2`, {how.upper()} 12 s in", code,
+            f"ended {ended:.1f} s after the signal; of its {family} processes, {left} left 5 s later")
+
+
 CASES = {
     "local": case_local,
     "dask": lambda w, s: case_local(w, s, "dask"),
@@ -180,6 +229,10 @@ CASES = {
     "forgers": case_forgers,
     "fat": lambda w, s: case_fat(w, s, "4096"),
     "fat-tight": lambda w, s: case_fat(w, s, "400"),
+    "nobody": case_nobody,
+    "no-key": case_no_key,
+    "tune-sigint": lambda w, s: case_tune_stopped(w, s, "sigint"),
+    "tune-kill": lambda w, s: case_tune_stopped(w, s, "kill"),
 }
 
 

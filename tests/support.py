@@ -177,6 +177,32 @@ class Cluster:
         for proc in [*self.workers, self.scheduler]:
             stop_process(proc)
 
+def stopped_tune(where: Path, signum: int, after_s: float = 12.0) -> tuple[int, float, int, int]:
+    """``rippleb tune`` of one built-in, stopped by ``signum`` ``after_s`` into its points: its
+    exit status, the seconds it took to end, its processes just before, and how many of them
+    were still running 5 s after it ended (issue 41: three SIGINTs once left it running 13
+    minutes, and ``kill -9`` its workers)."""
+    import psutil
+
+    env = {**os.environ, "RIPPLEB_KEY_FILE": str(where / "key")}
+    proc = subprocess.Popen([sys.executable, "-m", "rippleb", "tune", "--methods", "order-tracking", "--seeds",
+                             "100-104", "--jobs", "2", "--no-progress", "--out", "t.json"], cwd=where, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        time.sleep(after_s)
+        family = [proc.pid] + [child.pid for child in psutil.Process(proc.pid).children(recursive=True)]
+        start = time.monotonic()
+        os.kill(proc.pid, signum)
+        code = proc.wait(timeout=300)
+        ended = time.monotonic() - start
+        time.sleep(5)
+        left = [pid for pid in family if psutil.pid_exists(pid)
+                and psutil.Process(pid).status() != psutil.STATUS_ZOMBIE]
+    finally:
+        stop_process(proc)
+    return code, ended, len(family), len(left)
+
+
 def rippleb_cli(*args, **kwargs):
     return subprocess.run([str(BIN / "rippleb"), *map(str, args)], capture_output=True, text=True,
                           timeout=600, **kwargs)

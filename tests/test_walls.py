@@ -13,6 +13,7 @@ environment, which its process no longer inherits.
 import json
 import os
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -25,7 +26,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from support import install_dist  # a minimal installed distribution without pip
+from support import install_dist, stopped_tune  # a minimal installed distribution without pip; tune stopped by a signal
 
 #: A value no honest process holds: exported to the runner, it must reach no method.
 SECRET = "rippleb-secret-5f1c0d6a9e2b47c8"
@@ -482,6 +483,17 @@ def test_a_tuning_point_that_hangs_or_exits_costs_its_own_point(site, monkeypatc
         assert (score == float("inf")) == (x > 0.8 or x < 0.2), point
     assert any("timeout" in e for e in record["errors"]) and any("exited with code 3" in e for e in record["errors"])
     assert record["default_score"] < float("inf")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signum", [signal.SIGINT, pytest.param(signal.SIGKILL, marks=pytest.mark.heavy)])
+def test_tune_ends_at_once_on_a_signal_and_leaves_no_process(tmp_path, signum):
+    """The issue's ``tune`` rows: Ctrl-C ends it (130) within seconds, and neither Ctrl-C nor
+    ``kill -9`` leaves a worker of it running."""
+    code, ended, family, left = stopped_tune(tmp_path, signum)
+    assert code == (130 if signum == signal.SIGINT else -signal.SIGKILL)
+    assert ended < 30, ended           # 0.7 s measured; a loaded machine keeps a wide margin
+    assert family > 1 and left == 0, (family, left)
 
 
 # ----------------------------------------------------------------------------- columns a method cannot forge

@@ -16,14 +16,20 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
+from pathlib import Path
 
 import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
 
 import numpy as np
 
-from condition_table import rms_error, seeds_of
 from rippleb.registry import Registry
 from rippleb.simulator import simulate
+
+# The condition table's script (docs/tables/) streams and scores a fitted method as this
+# analysis needs: one copy of that sequence, shared.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "docs" / "tables"))
+from condition_table import rms_error, seeds_of  # noqa: E402
 
 DEFAULT_METHODS = "angle-adaptive,angle-adaptive-frozen,kalman-ripple,order-tracking,switched-notch"
 

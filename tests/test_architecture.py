@@ -275,40 +275,73 @@ def test_the_documented_tree_is_the_package():
 
 
 def _imported_modules(path: Path) -> list[tuple[str, int]]:
-    """``(module, line)`` of every import in ``path``, imports inside functions included."""
+    """``(module, line)`` of every import in ``path``, imports inside functions included, and
+    of every module loaded by name through ``importlib.util.spec_from_file_location``."""
     found = []
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.Import):
             found += [(alias.name, node.lineno) for alias in node.names]
         elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
             found.append((node.module, node.lineno))
+        elif isinstance(node, ast.Call) and getattr(node.func, "attr", getattr(node.func, "id", None)) \
+                == "spec_from_file_location" and node.args and isinstance(node.args[0], ast.Constant):
+            found.append((str(node.args[0].value), node.lineno))
     return found
 
 
+#: The scripts held to the outside rule: the benchmarks and the scripts of docs' tables.
+SCRIPT_FOLDERS = ("benchmarks", "docs/tables")
+
+
 def outside_violations(root: Path = ROOT.parent) -> list[str]:
-    """Tests stand above the package's layers (they may use any module of it), with a rule
-    of their own: a test file imports no other test file (what tests share is in
-    ``tests/support.py``, the fixtures in ``conftest.py``). Benchmarks are not held to it
-    yet: four table scripts (``benchmarks/*_table.py``) still take their hostile plugins
-    from the test files that define them (issue 41, item 5: not done)."""
+    """Tests and scripts stand above the package's layers (they may use any module of it),
+    with a rule of their own: no file imports a test file (a ``test_*`` module). What tests
+    share is in the package ``tests/support/`` (its modules are held to the rule too), the
+    fixtures in ``conftest.py``; a script of ``benchmarks/`` or ``docs/tables/`` that needs
+    a test's hostile plugin imports it from ``support`` (``support.hostile``,
+    ``support.walls``, ``support.bad_inputs``)."""
+    def test_files(path: Path) -> list[tuple[str, int]]:
+        return [(m, n) for m, n in _imported_modules(path) if m.split(".")[0].startswith("test_")]
+
     out = []
-    for path in sorted((root / "tests").glob("*.py")):
-        out += [f"tests/{path.name} imports the test file {m}, line {n}: share it through tests/support.py"
-                for m, n in _imported_modules(path) if m.split(".")[0].startswith("test_")]
+    tests = root / "tests"
+    for path in sorted([*tests.glob("*.py"), *tests.glob("support/*.py")]):
+        out += [f"{path.relative_to(root)} imports the test file {m}, line {n}: share it through tests/support/"
+                for m, n in test_files(path)]
+    for folder in SCRIPT_FOLDERS:
+        for path in sorted((root / folder).glob("*.py")):
+            out += [f"{path.relative_to(root)} imports the test file {m}, line {n}: import it from tests/support/"
+                    for m, n in test_files(path)]
     return out
 
 
-def test_no_test_file_imports_another():
+def test_no_test_file_or_script_imports_a_test_file():
     found = outside_violations()
     assert not found, "\n".join(found)
 
 
 def test_the_outside_rules_see_what_they_forbid(tmp_path):
-    (tmp_path / "tests").mkdir()
-    (tmp_path / "tests" / "test_a.py").write_text("def f():\n    from test_b import x\n")
-    (tmp_path / "tests" / "support.py").write_text("import rippleb\n")
+    """The rule fails on a test file, a support module, a benchmark and a table script that
+    each import a test file (the last by path), and passes what they may import."""
+    for rel, text in {
+        "tests/test_a.py": "def f():\n    from test_b import x\n",
+        "tests/test_b.py": "from support.hostile import PROBER\nimport support\n",
+        "tests/support/__init__.py": "import rippleb\n",
+        "tests/support/hostile.py": "import test_b\n",
+        "benchmarks/bench_x.py": "import sys\nfrom support import install_dist\nfrom test_walls import PROBER\n",
+        "benchmarks/fine.py": "from support.walls import walls_cli\nimport rippleb\n",
+        "docs/tables/x_table.py": "import importlib.util\n"
+                                  "spec = importlib.util.spec_from_file_location('test_bad_input', 'p')\n",
+        "docs/tables/y_table.py": "import importlib.util\n"
+                                  "spec = importlib.util.spec_from_file_location('fault_table', 'p')\n",
+    }.items():
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(text)
     assert outside_violations(tmp_path) == [
-        "tests/test_a.py imports the test file test_b, line 2: share it through tests/support.py"]
+        "tests/support/hostile.py imports the test file test_b, line 1: share it through tests/support/",
+        "tests/test_a.py imports the test file test_b, line 2: share it through tests/support/",
+        "benchmarks/bench_x.py imports the test file test_walls, line 3: import it from tests/support/",
+        "docs/tables/x_table.py imports the test file test_bad_input, line 2: import it from tests/support/"]
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ from rippleb.simulator import simulate
 from rippleb.simulator.sensors import STRAIN_RANGE
 
 ROOT = Path(__file__).resolve().parents[1]
-_spec = importlib.util.spec_from_file_location("fault_table", ROOT / "benchmarks" / "fault_table.py")
+_spec = importlib.util.spec_from_file_location("fault_table", ROOT / "docs" / "tables" / "fault_table.py")
 fault_table = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(fault_table)
 

@@ -126,7 +126,7 @@ def test_gear_keeping_passes_the_conformance_kit():
 
 
 def test_the_paired_table_pairs_devices_and_skips_cases_without_gear_torque():
-    """benchmarks/gear_keeping_table.py (docs/methods/gear-keeping.md's tables) on rows made
+    """docs/tables/gear_keeping_table.py (docs/methods/gear-keeping.md's tables) on rows made
     up for the purpose: the difference is per device, over the scenarios; the removed share
     only where the gear torque reaches 0.1 Nm RMS."""
     import importlib.util
@@ -134,7 +134,7 @@ def test_the_paired_table_pairs_devices_and_skips_cases_without_gear_torque():
 
     import pandas as pd
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "gear_keeping_table.py"
+    path = Path(__file__).resolve().parents[1] / "docs" / "tables" / "gear_keeping_table.py"
     spec = importlib.util.spec_from_file_location("gear_keeping_table", path)
     table_module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(table_module)

@@ -2,9 +2,9 @@
 
 The package is installed as a distribution (a ``.dist-info`` directory with entry points)
 in a site directory put on ``PYTHONPATH`` of the ``rippleb`` subprocess only, so the test
-environment itself is unchanged. Each plugin attacks one promise: rows forged through the
-cache, truth read from the cache, processes left behind, the runner signalled, imports
-that hang or exit.
+environment itself is unchanged. Each plugin (``support.hostile.INTEGRITY_HOSTILE``) attacks
+one promise: rows forged through the cache, truth read from the cache, processes left
+behind, the runner signalled, imports that hang or exit.
 """
 
 import contextlib
@@ -21,151 +21,17 @@ import pytest
 from conftest import HANG_TIMEOUT_S
 
 from support import NAPPER, install_dist, nap, napping
+from support.hostile import INTEGRITY_HOSTILE, SLOW_IMPORT
 
 pytestmark = pytest.mark.slow
 
-HOSTILE = textwrap.dedent('''
-    import glob, io, os, signal, subprocess, sys, tempfile, time
-    import numpy as np
-    from rippleb import Method
-
-    def _cache_files():
-        """Every cache file a plugin could find: the temporary directory, the run directory
-        below the working directory, and the directories of its inherited file descriptors."""
-        tmp = tempfile.gettempdir()   # its scratch directory, two levels below the run's (issue 34)
-        found = [path for root in (tmp, os.path.dirname(os.path.dirname(tmp)))
-                 for path in glob.glob(os.path.join(root, "rippleb-cache-*", "*"))]
-        found += glob.glob(os.path.join("*", ".cache", "*"))
-        for fd in os.listdir("/proc/self/fd"):
-            try:
-                target = os.readlink(f"/proc/self/fd/{fd}")
-            except OSError:
-                continue
-            if target.startswith("/"):
-                found += glob.glob(os.path.join(os.path.dirname(target), ".cache", "*"))
-        return sorted(set(found))
-
-    class Forger(Method):
-        """Rewrites every cached log it can find: the strain of every other row x 100."""
-        name = "forger"
-        def fit(self, calibration):
-            for path in _cache_files():
-                try:
-                    os.chmod(path, 0o644)
-                    with np.load(path, allow_pickle=False) as npz:
-                        arrays = {k: npz[k] for k in npz.files}
-                    if "strain" in arrays:
-                        arrays["strain"] = arrays["strain"] * 100.0
-                    if "torque_true" in arrays:
-                        arrays["torque_true"] = arrays["torque_true"] + 30.0
-                    buf = io.BytesIO()
-                    np.savez(buf, **arrays)
-                    with open(path, "wb") as fh:
-                        fh.write(buf.getvalue())
-                except Exception:
-                    pass
-        def step(self, block):
-            return block.strain * 0.0
-
-    class Peeker(Method):
-        """Returns torque_true if it can find it anywhere in the cache."""
-        name = "peeker"
-        def reset(self, spec):
-            self.truth, self.pos = None, 0
-            for path in _cache_files():
-                try:
-                    with np.load(path, allow_pickle=False) as npz:
-                        if "torque_true" in npz.files:
-                            self.truth = npz["torque_true"]
-                except Exception:
-                    pass
-        def step(self, block):
-            n = len(block)
-            if self.truth is not None and len(self.truth) >= self.pos + n:
-                out = self.truth[self.pos:self.pos + n]
-            else:
-                out = np.zeros(n)
-            self.pos += n
-            return out
-
-    def _truths_in_memory():
-        """Scored truths anywhere in this process: a Truth object the garbage collector
-        tracks, or one a frame up the stack holds (the runner's, if this process is a fork
-        of it)."""
-        import gc, sys
-        def is_truth(value):
-            return type(value).__name__ == "Truth" and getattr(value, "torque_true", None) is not None
-        found = sum(is_truth(o) for o in gc.get_objects())
-        frame = sys._getframe()
-        while frame is not None:
-            for value in list(frame.f_locals.values()):
-                truths = getattr(value, "truths", None)
-                found += is_truth(value) + (len(truths) if isinstance(truths, dict) else 0)
-            frame = frame.f_back
-        return found
-
-    class Rummager(Method):
-        """Searches its own process's memory for the truth it is scored on."""
-        name = "rummager"
-        def reset(self, spec):
-            found = _truths_in_memory()
-            if found:
-                raise RuntimeError(f"found {found} truths in my own memory")
-        def step(self, block):
-            return block.strain * 0.0
-
-    class Spawner(Method):
-        """Leaves a detached process, and a forked grandchild in its own session."""
-        name = "spawner"
-        def fit(self, calibration):
-            subprocess.Popen(["sleep", "987"], start_new_session=True)
-            if os.fork() == 0:
-                os.setsid()
-                os.execvp("sleep", ["sleep", "988"])
-            time.sleep(0.2)
-            print("spawned", flush=True)   # on its log: it may write no file outside its scratch directory
-        def step(self, block):
-            return block.strain * 0.0
-
-    def _ancestors():
-        pid, found = os.getpid(), []
-        while pid > 1:
-            with open(f"/proc/{pid}/stat") as fh:
-                pid = int(fh.read().rsplit(")", 1)[1].split()[1])
-            try:
-                with open(f"/proc/{pid}/cmdline", "rb") as fh:
-                    found.append((pid, fh.read().replace(b"\\0", b" ").decode()))
-            except OSError:
-                break
-        return found
-
-    class Killer(Method):
-        """Signals its process group, its parent, and every ancestor that runs rippleb."""
-        name = "killer"
-        def fit(self, calibration):
-            for action in (lambda: os.killpg(0, signal.SIGTERM),
-                           lambda: os.kill(os.getppid(), signal.SIGKILL)):
-                try:
-                    action()
-                except Exception:
-                    pass
-            for pid, cmdline in _ancestors():
-                if "rippleb" in cmdline and " run" in cmdline:
-                    try:
-                        os.kill(pid, signal.SIGKILL)
-                    except Exception:
-                        pass
-        def step(self, block):
-            return block.strain * 0.0
-''')
-SLOW_IMPORT = "import time\ntime.sleep(3600)\n"
 EXITS = "raise SystemExit(3)\n"
 
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory):
     site = tmp_path_factory.mktemp("hostile-site")
-    install_dist(site, "rippleb-hostile", "rippleb_hostile", HOSTILE,
+    install_dist(site, "rippleb-hostile", "rippleb_hostile", INTEGRITY_HOSTILE,
           {"forger": "Forger", "peeker": "Peeker", "spawner": "Spawner", "killer": "Killer",
            "rummager": "Rummager"})
     install_dist(site, "rippleb-slow", "rippleb_slow", SLOW_IMPORT, {"slow-import": "Anything"})
@@ -249,7 +115,7 @@ def test_where_the_cache_is_writable_a_rewrite_fails_the_rows_it_tampered(tmp_pa
     from rippleb.engine.process import isolation, landlock
 
     namespace = {}
-    exec(HOSTILE, namespace)
+    exec(INTEGRITY_HOSTILE, namespace)
     monkeypatch.setattr(isolation, "NAMESPACE_CHOICES",   # no mount namespace
                         tuple(c for c in isolation.NAMESPACE_CHOICES if not c[1].mount))
     monkeypatch.setattr(landlock, "restrict", lambda *args, **kwargs: ["Landlock"])          # nor Landlock

@@ -3,7 +3,6 @@
 import os
 import subprocess
 import sys
-import textwrap
 import time
 import warnings
 
@@ -17,23 +16,7 @@ import rippleb
 from rippleb import InputError
 from rippleb.engine.results import COLUMNS, RunWarning, read_rows
 from support import fake_perfect as fake, fake_simulate  # noqa: F401 - the fixture is used by name
-
-SCENARIO = textwrap.dedent("""\
-    [robot]
-    posture = {{ elbow_joint = {posture} }}
-    [trajectory]
-    start = -1.8
-    [[trajectory.segment]]
-    kind = "move"
-    by = {by}
-    duration = {duration}
-    """)
-
-
-def _scenario(path, by=0.1, duration=0.2, posture="1.5"):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(SCENARIO.format(by=by, duration=duration, posture=posture))
-    return path
+from support import write_move_scenario
 
 
 def cli(*args, cwd=None, timeout=300):
@@ -46,10 +29,10 @@ def cli(*args, cwd=None, timeout=300):
 
 @pytest.mark.slow
 def test_different_files_give_distinct_rows(tmp_path):
-    _scenario(tmp_path / "a b.toml", by=0.1)
-    _scenario(tmp_path / "a_b.toml", by=0.05)
-    _scenario(tmp_path / "\N{SLIGHTLY SMILING FACE}.toml", by=0.08)
-    _scenario(tmp_path / "\N{UPSIDE-DOWN FACE}.toml", by=0.12)
+    write_move_scenario(tmp_path / "a b.toml", by=0.1)
+    write_move_scenario(tmp_path / "a_b.toml", by=0.05)
+    write_move_scenario(tmp_path / "\N{SLIGHTLY SMILING FACE}.toml", by=0.08)
+    write_move_scenario(tmp_path / "\N{UPSIDE-DOWN FACE}.toml", by=0.12)
     files = ["a b.toml", "a_b.toml", "\N{SLIGHTLY SMILING FACE}.toml", "\N{UPSIDE-DOWN FACE}.toml"]
     proc = cli("run", "--methods", "raw", "--scenarios", ",".join(files), "--seeds", "1", "--jobs", "2",
                "--no-progress", "--out", "out", cwd=tmp_path)
@@ -67,7 +50,7 @@ def test_different_files_give_distinct_rows(tmp_path):
 def test_ambiguous_selections_are_refused(tmp_path, files, words):
     for name in files:
         if name.endswith(".toml"):
-            _scenario(tmp_path / name, by=0.05 + 0.01 * len(name))
+            write_move_scenario(tmp_path / name, by=0.05 + 0.01 * len(name))
     proc = cli("run", "--methods", "raw", "--scenarios", ",".join(files), "--seeds", "1", "--out", "out",
                cwd=tmp_path)
     assert proc.returncode == 2 and words in proc.stderr and proc.stderr.count("\n") == 1, proc.stderr
@@ -75,7 +58,7 @@ def test_ambiguous_selections_are_refused(tmp_path, files, words):
 
 
 def test_one_file_given_twice_is_one_scenario(fake, tmp_path):
-    _scenario(tmp_path / "x.toml")
+    write_move_scenario(tmp_path / "x.toml")
     frame = rippleb.run(methods="raw", scenarios=[str(tmp_path / "x.toml"), str(tmp_path / "." / "x.toml")],
                         seeds=1)
     assert list(frame.scenario) == ["x"]
@@ -200,7 +183,7 @@ def test_the_whole_file_is_rewritten_once_the_interval_passes(tmp_path, monkeypa
 
 def test_scenario_names_like_na_stay_strings(fake, tmp_path):
     for name in ("NA", "null", "nan"):
-        _scenario(tmp_path / f"{name}.toml")
+        write_move_scenario(tmp_path / f"{name}.toml")
     scenarios = [str(tmp_path / f"{n}.toml") for n in ("NA", "null", "nan")]
     rippleb.run(methods="raw", scenarios=scenarios, seeds=1, out=tmp_path / "o")
     again = rippleb.run(methods="raw", scenarios=scenarios, seeds=1, out=tmp_path / "o", resume=True)
@@ -328,7 +311,7 @@ def test_unfit_calibration_logs_are_refused(tmp_path):
     ({"posture": "nan"}, "posture: elbow_joint = nan is not a finite angle"),
 ])
 def test_absurd_trajectories_are_refused(tmp_path, kwargs, words):
-    path = _scenario(tmp_path / "bad.toml", **kwargs)
+    path = write_move_scenario(tmp_path / "bad.toml", **kwargs)
     with pytest.raises(InputError, match=words):
         rippleb.run(methods="raw", scenarios=str(path), seeds=1)
 

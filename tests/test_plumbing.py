@@ -1,102 +1,28 @@
 """A method's process cannot reach the runner's plumbing (issue 25, item 2).
 
-``Prober`` tries, from its ``reset``, everything the issue found open: the processes it
-can see in ``/proc``, every file descriptor of theirs it can open for writing (the
-keeper's control pipe, the runner's terminal and results), the terminals in ``/dev/pts``,
-files in the run directory and the cache, and forged summary lines on its own output. It
-prints what it achieved on its own log (the one place it may write). Through the real CLI
-the worker is confined (a /proc of its own, terminals hidden, run directory and cache
-read-only); where the kernel refuses a mount namespace, the keeper and the runner are
-still not dumpable, so their descriptors stay closed to it.
+``Prober`` (``support.hostile.PLUMBING_PROBER``) tries, from its ``reset``, everything the
+issue found open: the processes it can see in ``/proc``, every file descriptor of theirs it
+can open for writing (the keeper's control pipe, the runner's terminal and results), the
+terminals in ``/dev/pts``, files in the run directory and the cache, and forged summary
+lines on its own output. It prints what it achieved on its own log (the one place it may
+write). Through the real CLI the worker is confined (a /proc of its own, terminals hidden,
+run directory and cache read-only); where the kernel refuses a mount namespace, the keeper
+and the runner are still not dumpable, so their descriptors stay closed to it.
 """
 
 import json
 import os
 import subprocess
 import sys
-import textwrap
 
 import pandas as pd
 import pytest
 
 import rippleb
 from support import install_dist  # a minimal installed distribution without pip
+from support.hostile import PLUMBING_PROBER
 
 pytestmark = pytest.mark.slow
-
-PROBER = textwrap.dedent('''
-    import glob, json, os, sys
-    import numpy as np
-    from rippleb import Method
-
-    FORGED = "12 rows (12 ok) in forged/results.csv"
-
-    def _ancestors(pid):
-        chain = []
-        while pid > 1 and len(chain) < 64:
-            try:
-                with open(f"/proc/{pid}/stat") as fh:
-                    pid = int(fh.read().rsplit(")", 1)[1].split()[1])
-            except (OSError, ValueError):
-                break
-            chain.append(pid)
-        return chain
-
-    def _try_write(path):
-        try:
-            fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
-        except OSError as exc:
-            return type(exc).__name__
-        os.close(fd)
-        return "opened"
-
-    def probe(runner, run_dir):
-        me = int(os.readlink("/proc/self"))   # its PID as this /proc counts (os.getpid() is 1)
-        try:
-            visible = sorted(int(p) for p in os.listdir("/proc") if p.isdigit())
-        except OSError:                       # Landlock: only its own entry of the host's /proc
-            visible = [me]
-        found = {"visible": visible, "opened": []}
-        for pid in found["visible"]:
-            if pid == me:
-                continue
-            try:
-                fds = os.listdir(f"/proc/{pid}/fd")
-            except OSError:
-                continue
-            for fd in fds:
-                try:
-                    target = os.readlink(f"/proc/{pid}/fd/{fd}")
-                except OSError:
-                    target = "?"
-                if _try_write(f"/proc/{pid}/fd/{fd}") == "opened":
-                    rippleb_process = pid == runner or runner in _ancestors(pid)
-                    found["opened"].append([pid, fd, target, rippleb_process])
-        found["terminals"] = {p: _try_write(p) for p in glob.glob("/dev/pts/[0-9]*")}
-        found["run_dir"] = {name: _try_write(os.path.join(run_dir, name)) for name in ("forged.txt", "results.csv")}
-        caches = glob.glob(os.path.join(os.environ.get("TMPDIR", "/tmp"), "rippleb-cache-*"))
-        found["cache"] = {c: _try_write(os.path.join(c, "forged.npz")) for c in caches}
-        try:
-            from rippleb.integrity import key_path
-            found["key_bytes"] = len(key_path().read_bytes())   # rippleb's key for row MACs
-        except (OSError, ImportError) as exc:                    # ImportError: a rippleb without keys
-            found["key_bytes"] = type(exc).__name__
-        print(FORGED)
-        print(FORGED, file=sys.stderr)
-        print("FOUND " + json.dumps(found), flush=True)   # its log: it may write nowhere else (issue 34)
-
-    class Prober(Method):
-        """Probes the runner's plumbing (``runner``: the runner's PID, 0 unknown), then returns zeros."""
-        name = "prober"
-        def __init__(self, run_dir="", runner=0):
-            self.run_dir, self.runner = run_dir, runner
-        def get_params(self):
-            return {}
-        def reset(self, spec):
-            probe(self.runner, self.run_dir)
-        def step(self, block):
-            return np.zeros(len(block))
-''')
 
 
 def _reports(run_dir):
@@ -116,7 +42,7 @@ def _assert_nothing_reached(found, run_dir):
 @pytest.fixture(scope="module")
 def site(tmp_path_factory):
     site = tmp_path_factory.mktemp("prober-site")
-    install_dist(site, "rippleb-prober", "rippleb_prober", PROBER, {"prober": "Prober"})
+    install_dist(site, "rippleb-prober", "rippleb_prober", PLUMBING_PROBER, {"prober": "Prober"})
     return site
 
 
@@ -153,7 +79,7 @@ def test_without_a_mount_namespace_the_plumbing_stays_closed(tmp_path, monkeypat
     from rippleb.engine.process import isolation, landlock
 
     namespace = {}
-    exec(PROBER, namespace)
+    exec(PLUMBING_PROBER, namespace)
     monkeypatch.setattr(isolation, "NAMESPACE_CHOICES",   # no mount namespace
                         tuple(c for c in isolation.NAMESPACE_CHOICES if not c[1].mount))
     monkeypatch.setattr(landlock, "restrict", lambda *args, **kwargs: ["Landlock"])

@@ -6,8 +6,6 @@ read; ``--resume`` and ``report`` drop and name the rows whose hash fails, and
 with the key in the test's own directory (``RIPPLEB_KEY_FILE``).
 """
 
-import csv
-import io
 import json
 import os
 import subprocess
@@ -15,6 +13,8 @@ import sys
 
 import pandas as pd
 import pytest
+
+from support.hostile import csv_rows, write_csv_rows
 
 pytestmark = pytest.mark.slow
 
@@ -26,18 +26,6 @@ def _cli(tmp_path, *args, key="key"):
     env = {**os.environ, "RIPPLEB_KEY_FILE": str(tmp_path / key)}
     return subprocess.run([sys.executable, "-m", "rippleb", *map(str, args)], capture_output=True, text=True,
                           env=env, cwd=tmp_path, timeout=300)
-
-
-def _rows(path):
-    return list(csv.DictReader(io.StringIO(path.read_text())))
-
-
-def _write_rows(path, rows):
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=list(rows[0]), lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
-    path.write_text(buffer.getvalue())
 
 
 @pytest.fixture(scope="module")
@@ -69,10 +57,10 @@ def test_an_untouched_run_verifies_with_no_warning(finished, tmp_path):
 
 def test_an_edited_row_is_named_dropped_and_run_again(finished, tmp_path):
     run = _copy(finished, tmp_path)
-    rows = _rows(run / "results.csv")
+    rows = csv_rows(run / "results.csv")
     original = rows[2]["rms_error_nm"]
     rows[2]["rms_error_nm"] = "0.001"                      # a flattering hand edit
-    _write_rows(run / "results.csv", rows)
+    write_csv_rows(run / "results.csv", rows)
     report = _cli(tmp_path, "report", run, "--out", "rep")
     assert report.returncode == 0, report.stderr
     assert "ignored 1 row(s) that rippleb did not write or that were changed since" in report.stderr
@@ -89,10 +77,10 @@ def test_a_forged_row_and_a_row_from_another_run_are_dropped(finished, tmp_path)
     run = _copy(finished, tmp_path)
     other = _cli(tmp_path, *RUN[:-1], "--seeds", "3", "--no-progress", "--out", "other")   # a genuine run, same key
     assert other.returncode == 0, other.stderr
-    rows = _rows(run / "results.csv")
-    foreign = [r for r in _rows(tmp_path / "other" / "results.csv") if r["seed"] == "2"][0]
+    rows = csv_rows(run / "results.csv")
+    foreign = [r for r in csv_rows(tmp_path / "other" / "results.csv") if r["seed"] == "2"][0]
     forged = dict(rows[0], method="lowpass", seed="7", rms_error_nm="0.002")
-    _write_rows(run / "results.csv", rows + [foreign, forged])
+    write_csv_rows(run / "results.csv", rows + [foreign, forged])
     report = _cli(tmp_path, "report", run, "--out", "rep")
     assert report.returncode == 0, report.stderr
     assert "ignored 2 row(s)" in report.stderr

@@ -1,7 +1,7 @@
 """Sealed runs (issue 25, item 5): a method that re-simulates its own scenario wins an
 unsealed run and gains nothing in a sealed one, and the salt never reaches a method's process.
 
-``resimulator`` is the hostile plugin of the issue: it finds its scenario, condition and
+``resimulator`` is the hostile plugin of the issue (``support.hostile.RESIMULATOR``): it finds its scenario, condition and
 seed (the scored log it is streamed from names them; it also brute-forces the seeds 0..3
 against its first block of strain), calls ``rippleb.simulate`` and returns the truth.
 ``Seeker`` searches everything a row can reach for the salt and for the device seeds
@@ -16,7 +16,6 @@ import os
 import stat
 import subprocess
 import sys
-import textwrap
 
 import numpy as np
 import pandas as pd
@@ -28,45 +27,7 @@ from rippleb.engine import sealing
 from rippleb.errors import InputError
 from rippleb.cli import main
 from support import install_dist  # a minimal installed distribution without pip
-
-RESIMULATOR = textwrap.dedent('''
-    import sys
-    import numpy as np
-    import rippleb
-    from rippleb import Method
-    from rippleb.data import SensorLog
-
-    def _scored_meta():
-        """The meta of the log this row streams: the row job holds it, up the stack."""
-        frame = sys._getframe()
-        while frame is not None:
-            for value in list(frame.f_locals.values()):
-                if isinstance(value, SensorLog) and value.torque_ref is None and "scenario" in value.meta:
-                    return value.meta
-            frame = frame.f_back
-        raise RuntimeError("found no scored log")
-
-    class Resimulator(Method):
-        """Re-simulates its own scenario and returns the truth."""
-        name = "resimulator"
-        def reset(self, spec):
-            self.truth, self.pos = None, 0
-        def _truth(self, block):
-            meta = _scored_meta()
-            scenario, condition = meta["scenario"], meta["condition"]
-            for seed in [meta["seed"]] + [s for s in range(4) if s != meta["seed"]]:
-                sim = rippleb.simulate(scenario, seed, condition)
-                if np.array_equal(sim.log.strain[:len(block)], block.strain):
-                    return sim.log.torque_true
-            # no seed reproduces the strain: the best guess left is the public seed's device
-            return rippleb.simulate(scenario, meta["seed"], condition).log.torque_true
-        def step(self, block):
-            if self.truth is None:
-                self.truth = self._truth(block)
-            out = self.truth[self.pos:self.pos + len(block)]
-            self.pos += len(block)
-            return out
-''')
+from support.hostile import RESIMULATOR
 
 
 @pytest.fixture(scope="module")

@@ -1,14 +1,14 @@
 """The containment cases of docs/robustness.md (issue 25, items 5 and 7), each through the real CLI.
 
-    python benchmarks/containment_table.py                          # this checkout
-    python benchmarks/containment_table.py --python OTHER/.venv/bin/python
-                                                                    # another install (e.g. 05c5036)
+    python docs/tables/containment_table.py                          # this checkout
+    python docs/tables/containment_table.py --python OTHER/.venv/bin/python
+                                                                     # another install (e.g. 05c5036)
 
 Every case runs as ``OTHER -m rippleb ...`` subprocesses in a fresh temporary directory,
-with the re-simulating plugin of tests/test_sealing.py and oddly named plugins on
-PYTHONPATH. Prints one Markdown row per case: exit code(s) and the outcome (the last
-error or warning line, or what the rows say). The full-disk case mounts a 64 KiB tmpfs and
-needs root; elsewhere it says so.
+with the re-simulating plugin of tests/test_sealing.py (from tests/support/hostile.py) and
+oddly named plugins on PYTHONPATH. Prints one Markdown row per case: exit code(s) and the
+outcome (the last error or warning line, or what the rows say). The full-disk case mounts a
+64 KiB tmpfs and needs root; elsewhere it says so.
 """
 
 from __future__ import annotations
@@ -26,9 +26,9 @@ from pathlib import Path
 
 import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))   # the support package
 from support import GOOD, PLUGIN, install_dist as _dist  # noqa: E402
-from test_sealing import RESIMULATOR  # noqa: E402
+from support.hostile import RESIMULATOR  # noqa: E402
 
 RUN = ["run", "--seeds", "1", "--jobs", "2", "--no-progress"]
 

@@ -1,12 +1,12 @@
 """The plumbing cases of docs/robustness.md section 9 (issue 25, item 2), through the real CLI.
 
-    python benchmarks/plumbing_table.py                      # this checkout
-    python benchmarks/plumbing_table.py --code /tmp/old      # another checkout (PYTHONPATH)
+    python docs/tables/plumbing_table.py                      # this checkout
+    python docs/tables/plumbing_table.py --code /tmp/old      # another checkout (PYTHONPATH)
 
-Runs the probing plugin of tests/test_plumbing.py beside ``raw`` and prints what it
-reached; then edits a finished run (a row's cell, a forged row, ``run.json``'s seeds) and
-prints what ``report`` and ``--resume`` say. Each case in a fresh temporary directory, with
-the key for row hashes in it (``RIPPLEB_KEY_FILE``).
+Runs the probing plugin of tests/test_plumbing.py (from tests/support/hostile.py) beside
+``raw`` and prints what it reached; then edits a finished run (a row's cell, a forged row,
+``run.json``'s seeds) and prints what ``report`` and ``--resume`` say. Each case in a fresh
+temporary directory, with the key for row hashes in it (``RIPPLEB_KEY_FILE``).
 """
 
 from __future__ import annotations
@@ -19,10 +19,9 @@ import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))   # the support package
 from support import install_dist as _dist  # noqa: E402
-from test_plumbing import PROBER  # noqa: E402
-from test_row_integrity import _rows, _write_rows  # noqa: E402
+from support.hostile import PLUMBING_PROBER, csv_rows, write_csv_rows  # noqa: E402
 
 
 def _cli(code: str | None, where: Path, site: Path, *args, env_extra=None):
@@ -68,20 +67,20 @@ def edits(code, site) -> list[str]:
         run = where / "run"
         _cli(code, where, site, "run", "--methods", "raw,lowpass", "--scenarios", "static-contact", "--seeds", "2",
              "--no-progress", "--out", run)
-        rows = _rows(run / "results.csv")
+        rows = csv_rows(run / "results.csv")
         if case == "an edited cell":
             rows[0]["rms_error_nm"] = "0.001"
-            _write_rows(run / "results.csv", rows)
+            write_csv_rows(run / "results.csv", rows)
         elif case == "a forged row":
-            _write_rows(run / "results.csv", rows + [dict(rows[0], seed="9", rms_error_nm="0.001")])
+            write_csv_rows(run / "results.csv", rows + [dict(rows[0], seed="9", rms_error_nm="0.001")])
         else:
             config = json.loads((run / "run.json").read_text())
             config["seeds"] = list(range(6))
             (run / "run.json").write_text(json.dumps(config))
         report = _cli(code, where, site, "report", run, "--out", "rep")
-        reported = len(_rows(where / "rep" / "results.csv")) if (where / "rep" / "results.csv").is_file() else "-"
+        reported = len(csv_rows(where / "rep" / "results.csv")) if (where / "rep" / "results.csv").is_file() else "-"
         resumed = _cli(code, where, site, "run", "--resume", run, "--no-progress")
-        kept = _rows(run / "results.csv")
+        kept = csv_rows(run / "results.csv")
         out.append(f"| {case} | report {report.returncode}, {reported} rows; "
                    f"{_last(report.stderr) if 'warning' in report.stderr else 'no warning'} | "
                    f"resume {resumed.returncode}, {len(kept)} rows, "
@@ -94,7 +93,7 @@ def main() -> None:
     parser.add_argument("--code", help="checkout whose rippleb to run (put first on PYTHONPATH)")
     args = parser.parse_args()
     site = Path(tempfile.mkdtemp(prefix="rippleb-prober-site-"))
-    _dist(site, "rippleb-prober", "rippleb_prober", PROBER, {"prober": "Prober"})
+    _dist(site, "rippleb-prober", "rippleb_prober", PLUMBING_PROBER, {"prober": "Prober"})
     print("\n".join(probe(args.code, site)))
     print("\n".join(edits(args.code, site)))
 

@@ -7,8 +7,8 @@ over the scenarios where it is defined (0.1 Nm RMS of gear torque at least). Sta
 report's own paired lead (:func:`rippleb.report.paired.paired_test`, a 95 % t interval,
 no Bonferroni correction here: one table per question). Optionally per scenario.
 
-    python benchmarks/gear_keeping_table.py runs/base10 runs/gk10 [--by-scenario]
-    python benchmarks/gear_keeping_table.py runs/te_sweep
+    python docs/tables/gear_keeping_table.py runs/base10 runs/gk10 [--by-scenario]
+    python docs/tables/gear_keeping_table.py runs/te_sweep
 
 docs/methods/gear-keeping.md copies the tables and gives the commands that made the runs.
 """

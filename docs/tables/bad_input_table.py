@@ -1,30 +1,29 @@
 """Every bad input of tests/test_bad_input.py, run through ``python -m rippleb``, as a
 Markdown table of the exit status and the stderr line (for docs/robustness.md).
 
-    python benchmarks/bad_input_table.py
+    python docs/tables/bad_input_table.py
+
+The cases are :func:`support.bad_inputs.bad_inputs`, the ones the test runs.
 """
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))   # the support package
+from support.bad_inputs import bad_inputs  # noqa: E402
 
 
 def main() -> int:
-    spec = importlib.util.spec_from_file_location("test_bad_input", ROOT / "tests" / "test_bad_input.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
     print("| bad input | command | exit | stderr (one line) | written |")
     print("|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
-        cases = module._setup(root)
+        cases = bad_inputs(root)
         for name, (argv, site, _) in cases.items():
             before = set(root.rglob("*"))
             env = dict(os.environ)

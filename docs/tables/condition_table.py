@@ -5,7 +5,7 @@ session, the same under every condition) and streamed over each scenario simulat
 each condition; the table gives the mean ``rms_error_nm`` over the seeds. Use it to see how
 a method copes with a condition without the runner.
 
-Run: ``python benchmarks/condition_table.py [--seeds 900-904] [--scenarios paper-quintic,stop-restart]
+Run: ``python docs/tables/condition_table.py [--seeds 900-904] [--scenarios paper-quintic,stop-restart]
 [--methods ...] [--calibration calibration]``
 """
 

@@ -1,12 +1,12 @@
 """The outcome of each attack of issue 41 on the walls, as docs/robustness.md section 11 shows it.
 
-    python benchmarks/walls_table.py [--only NAME,...]
+    python docs/tables/walls_table.py [--only NAME,...]
 
 Every case runs the real CLI in a fresh directory, with the hostile methods of
-``tests/test_walls.py`` (the same plugin, installed as a distribution on ``PYTHONPATH``) and
-a secret exported to the runner; it prints one Markdown row per case: the command, its exit
-status and what happened (what the prober reached, the rows' statuses, raw's error beside
-it). The tests of ``tests/test_walls.py`` assert the same outcomes.
+``tests/support/walls.py`` (the plugin ``tests/test_walls.py`` installs, as a distribution
+on ``PYTHONPATH``) and a secret exported to the runner; it prints one Markdown row per case:
+the command, its exit status and what happened (what the prober reached, the rows'
+statuses, raw's error beside it). The tests of ``tests/test_walls.py`` assert the same outcomes.
 """
 
 from __future__ import annotations
@@ -20,12 +20,13 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))   # the support package
 
 import rippleb  # noqa: E402,F401 - before numpy: the portable numeric paths
 
-from test_walls import METHODS, PROBER, Listener, _cli, _label, _probe, _rows  # noqa: E402
 from support import install_dist as _dist  # noqa: E402
+from support.walls import (WALLS_METHODS, WALLS_PROBER, Listener, probe_of, rows_by_method,  # noqa: E402
+                           walls_cli, walls_label)
 
 RUN = ("--scenarios", "static-contact", "--seeds", "1", "--no-progress")
 
@@ -47,7 +48,7 @@ def _reached(found: dict) -> str:
 
 
 def _rows_text(run: Path, skip=("prober",)) -> str:
-    rows = _rows(run)
+    rows = rows_by_method(run)
     return ", ".join(f"{m} {r['status']}" + (f" {float(r['rms_error_nm']):.3f}" if r["status"] == "ok" else "")
                      for m, r in sorted(rows.items()) if m not in skip)
 
@@ -55,13 +56,13 @@ def _rows_text(run: Path, skip=("prober",)) -> str:
 def case_local(where: Path, site: Path, executor: str = "local") -> tuple[str, int, str]:
     listener = Listener()
     try:
-        method = _label(run_dir=str(where / "run"), home_file=str(Path.home() / ".bashrc"), port=listener.port)
+        method = walls_label(run_dir=str(where / "run"), home_file=str(Path.home() / ".bashrc"), port=listener.port)
         args = ("run", "--methods", f"raw,{method}", *RUN, "--jobs", "2", "--executor", executor, "--out", "run")
-        proc = _cli(where, site, *args)
+        proc = walls_cli(where, site, *args)
     finally:
         listener.close()
     return (f"`rippleb run --methods raw,prober[...] ... --executor {executor}`", proc.returncode,
-            f"{_reached(_probe(where / 'run'))}; the listener received {len(listener.received)} connection(s); "
+            f"{_reached(probe_of(where / 'run'))}; the listener received {len(listener.received)} connection(s); "
             f"rows: {_rows_text(where / 'run')}")
 
 
@@ -74,15 +75,15 @@ def case_scheduler(where: Path, site: Path) -> tuple[str, int, str]:
     cluster = Cluster(where, n=2)
     try:
         cluster.wait_for_workers(2)
-        method = _label(run_dir=str(where / "run"), scheduler=cluster.address)
-        proc = _cli(where, site, "run", "--methods", f"raw,{method}", *RUN, "--scheduler", cluster.address,
-                    "--out", "run")
+        method = walls_label(run_dir=str(where / "run"), scheduler=cluster.address)
+        proc = walls_cli(where, site, "run", "--methods", f"raw,{method}", *RUN, "--scheduler", cluster.address,
+                         "--out", "run")
     finally:
         cluster.close()
-    report = _cli(where, site, "report", "run", "--out", "rep")
+    report = walls_cli(where, site, "report", "run", "--out", "rep")
     return ("`rippleb run --methods raw,prober[scheduler=ADDR,...] --scheduler ADDR` (a `dask scheduler` and two "
             "`dask worker` started by hand)", proc.returncode,
-            f"{_reached(_probe(where / 'run'))}; rows: {_rows_text(where / 'run')}; `rippleb report run`: exit "
+            f"{_reached(probe_of(where / 'run'))}; rows: {_rows_text(where / 'run')}; `rippleb report run`: exit "
             f"{report.returncode}, {'no row ignored' if 'ignored' not in report.stderr else report.stderr.strip()}")
 
 
@@ -92,24 +93,24 @@ def case_log(where: Path, site: Path) -> tuple[str, int, str]:
 
     write_log(simulate("static-contact", 0).log, where / "rec.csv")
     write_log(simulate("calibration", 0).log, where / "cal.csv")
-    method = _label(log=str(where / "rec.csv"), run_dir=str(where / "run"))
-    proc = _cli(where, site, "run", "--log", "rec.csv", "--calibration", "cal.csv", "--methods", f"raw,{method}",
-                "--no-progress", "--out", "run")
-    found = _probe(where / "run")
+    method = walls_label(log=str(where / "rec.csv"), run_dir=str(where / "run"))
+    proc = walls_cli(where, site, "run", "--log", "rec.csv", "--calibration", "cal.csv", "--methods", f"raw,{method}",
+                     "--no-progress", "--out", "run")
+    found = probe_of(where / "run")
     return ("`rippleb run --log rec.csv --calibration cal.csv --methods raw,prober[log=rec.csv,...]`",
             proc.returncode, f"the log: {found['read']['log']} (-EACCES); {_reached(found)}; "
                              f"rows: {_rows_text(where / 'run')}")
 
 
 def case_salt(where: Path, site: Path, given: str) -> tuple[str, int, str]:
-    first = _cli(where, site, "run", "--methods", "raw", *RUN, "--sealed", "salt", "--out", "run")
+    first = walls_cli(where, site, "run", "--methods", "raw", *RUN, "--sealed", "salt", "--out", "run")
     assert first.returncode == 0, first.stderr
     shutil.copy(where / "salt", where / "salt-copy")
-    method = _label(run_dir=str(where / "run"), salt=str(where / "salt"), salt_copy=str(where / "salt-copy"))
-    proc = _cli(where, site, "run", "--resume", "run", "--methods", f"raw,{method}", "--salt-file",
-                "salt" if given == "file" else "-", "--no-progress",
-                stdin=(where / "salt").read_text() if given == "stdin" else None)
-    found = _probe(where / "run")
+    method = walls_label(run_dir=str(where / "run"), salt=str(where / "salt"), salt_copy=str(where / "salt-copy"))
+    proc = walls_cli(where, site, "run", "--resume", "run", "--methods", f"raw,{method}", "--salt-file",
+                     "salt" if given == "file" else "-", "--no-progress",
+                     stdin=(where / "salt").read_text() if given == "stdin" else None)
+    found = probe_of(where / "run")
     return (f"`rippleb run --sealed salt`, then `rippleb run --resume run --methods raw,prober[salt=...,salt_copy=...] "
             f"--salt-file {'salt' if given == 'file' else '- < salt'}`", proc.returncode,
             f"the salt file: {found['read']['salt']}, its copy: {found['read']['salt_copy']}; {_reached(found)}; "
@@ -118,7 +119,7 @@ def case_salt(where: Path, site: Path, given: str) -> tuple[str, int, str]:
 
 def case_check(where: Path, site: Path, name: str) -> tuple[str, int, str]:
     start = time.monotonic()
-    proc = _cli(where, site, "check", name, "--timeout", "20")
+    proc = walls_cli(where, site, "check", name, "--timeout", "20")
     failed = [line.strip() for line in proc.stdout.splitlines() if line.startswith("  FAIL")]
     return (f"`rippleb check {name} --timeout 20`", proc.returncode,
             f"{'; '.join(failed)}; `{proc.stdout.strip().splitlines()[-1]}`; {time.monotonic() - start:.0f} s")
@@ -144,8 +145,8 @@ def case_tune(where: Path, site: Path) -> tuple[str, int, str]:
 
 
 def case_forgers(where: Path, site: Path) -> tuple[str, int, str]:
-    proc = _cli(where, site, "run", "--methods", "raw,clockstopper,framer,huge", *RUN, "--jobs", "2", "--out", "run")
-    rows = _rows(where / "run")
+    proc = walls_cli(where, site, "run", "--methods", "raw,clockstopper,framer,huge", *RUN, "--jobs", "2", "--out", "run")
+    rows = rows_by_method(where / "run")
     text = "; ".join(f"{m}: {r['status']} ({r['message'][:110]})" for m, r in sorted(rows.items()) if m != "raw")
     return ("`rippleb run --methods raw,clockstopper,framer,huge ...`", proc.returncode,
             f"{text}; clockstopper's fit_s {float(rows['clockstopper']['fit_s']):.2f} s (it slept 2 s, its clock "
@@ -183,14 +184,14 @@ def case_nobody(where: Path, site: Path) -> tuple[str, int, str]:
     site = _nobodys(where, site)
     listener = Listener()
     try:
-        method = _label(run_dir=str(where / "run"), port=listener.port)
-        proc = _cli(where, site, "run", "--methods", f"raw,{method}", *RUN, "--jobs", "2", "--out", "run",
-                    user=65534, env={"HOME": "/nonexistent", "TMPDIR": str(where)})
+        method = walls_label(run_dir=str(where / "run"), port=listener.port)
+        proc = walls_cli(where, site, "run", "--methods", f"raw,{method}", *RUN, "--jobs", "2", "--out", "run",
+                         user=65534, env={"HOME": "/nonexistent", "TMPDIR": str(where)})
     finally:
         listener.close()
     warned = [line for line in proc.stderr.splitlines() if "warning" in line]
     return ("`setpriv --reuid=65534 ... rippleb run --methods raw,prober[...]` (`HOME=/nonexistent`)", proc.returncode,
-            f"{_reached(_probe(where / 'run'))}; the listener received {len(listener.received)} connection(s); "
+            f"{_reached(probe_of(where / 'run'))}; the listener received {len(listener.received)} connection(s); "
             f"warnings: {len(warned)}; rows: {_rows_text(where / 'run')}")
 
 
@@ -198,8 +199,8 @@ def case_no_key(where: Path, site: Path) -> tuple[str, int, str]:
     """uid 65534 with no writable home and no ``RIPPLEB_KEY_FILE``: a run, then its resume."""
     site = _nobodys(where, site)
     env = {"HOME": "/nonexistent", "TMPDIR": str(where), "RIPPLEB_KEY_FILE": ""}
-    first = _cli(where, site, "run", "--methods", "raw", *RUN, "--out", "run", user=65534, env=env)
-    resumed = _cli(where, site, "run", "--resume", "run", "--no-progress", user=65534, env=env)
+    first = walls_cli(where, site, "run", "--methods", "raw", *RUN, "--out", "run", user=65534, env=env)
+    resumed = walls_cli(where, site, "run", "--resume", "run", "--no-progress", user=65534, env=env)
     said = [line for line in first.stderr.splitlines() if line.startswith("rippleb: warning")]
     return ("`setpriv --reuid=65534 ... rippleb run --methods raw ...`, then `rippleb run --resume run` "
             "(`HOME=/nonexistent`, no `RIPPLEB_KEY_FILE`)", f"{first.returncode}, {resumed.returncode}",
@@ -241,7 +242,7 @@ def main() -> None:
     parser.add_argument("--only", help="comma-separated cases (default: all): " + ", ".join(CASES))
     args = parser.parse_args()
     site = Path(tempfile.mkdtemp(prefix="rippleb-walls-site-"))
-    _dist(site, "rippleb-walls", "rippleb_walls", PROBER, METHODS)
+    _dist(site, "rippleb-walls", "rippleb_walls", WALLS_PROBER, WALLS_METHODS)
     print("| case | command | exit | what happened |\n|---|---|---|---|", flush=True)
     for name in (args.only.split(",") if args.only else CASES):
         where = Path(tempfile.mkdtemp(prefix=f"rippleb-walls-{name}-"))

@@ -1,12 +1,12 @@
 """The integrity cases of docs/robustness.md, each through the real CLI, as a Markdown table.
 
-    python benchmarks/integrity_table.py                # this checkout
-    python benchmarks/integrity_table.py --root DIR     # another copy of rippleb (e.g. an older commit),
-                                                        # put first on PYTHONPATH
+    python docs/tables/integrity_table.py                # this checkout
+    python docs/tables/integrity_table.py --root DIR     # another copy of rippleb (e.g. an older commit),
+                                                         # put first on PYTHONPATH
 
 Every case runs in a fresh temporary directory; plugins come from a site directory of
 ``.dist-info`` distributions put on PYTHONPATH (the hostile package of
-tests/test_integrity.py). Prints one row per case: exit code(s) and the outcome.
+tests/test_integrity.py, from tests/support/hostile.py). Prints one row per case: exit code(s) and the outcome.
 """
 
 from __future__ import annotations
@@ -25,10 +25,9 @@ import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb
 import numpy as np
 import pandas as pd
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from test_integrity import HOSTILE, SLOW_IMPORT  # noqa: E402
-from support import NAPPER, install_dist as _dist, nap, napping  # noqa: E402
-from test_integrity_inputs import SCENARIO  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))   # the support package
+from support import NAPPER, install_dist as _dist, nap, napping, write_move_scenario  # noqa: E402
+from support.hostile import INTEGRITY_HOSTILE, SLOW_IMPORT  # noqa: E402
 
 RUN = ["run", "--seeds", "1", "--jobs", "2", "--no-progress"]
 
@@ -41,9 +40,7 @@ class Case:
                     "HOSTILE_PIDS": str(self.dir / "pids")}
 
     def scenario(self, name, by=0.1, duration=0.2, posture="1.5"):
-        path = self.dir / name
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(SCENARIO.format(by=by, duration=duration, posture=posture))
+        write_move_scenario(self.dir / name, by, duration, posture)
 
     def cli(self, *args, timeout=300):
         try:
@@ -343,7 +340,7 @@ def main() -> None:
     parser.add_argument("-k", help="only cases whose title contains one of these comma-separated words")
     args = parser.parse_args()
     site = Path(tempfile.mkdtemp(prefix="rippleb-site-"))
-    _dist(site, "rippleb-hostile", "rippleb_hostile", HOSTILE,
+    _dist(site, "rippleb-hostile", "rippleb_hostile", INTEGRITY_HOSTILE,
           {"forger": "Forger", "peeker": "Peeker", "spawner": "Spawner", "killer": "Killer"})
     _dist(site, "rippleb-slow", "rippleb_slow", SLOW_IMPORT, {"slow-import": "Anything"})
     _dist(site, "rippleb-napper", "rippleb_napper", NAPPER, {"napper": "Napper"})

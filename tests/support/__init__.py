@@ -1,7 +1,12 @@
-"""What several test modules share: the one support module (issue 41), so that no test file
+"""What several test modules share: the one support package (issue 41), so that no test file
 imports another. Scenario TOML, synthetic logs, installing a plugin without pip, the CLI's
 one-line errors, the tiny fake simulation and its exact method, a plugin that naps in its
 fit, a Dask cluster of real processes, a synthetic report frame.
+
+Its submodules hold what the tests share with the outcome-table scripts of ``docs/tables/``:
+:mod:`support.walls` (the walls prober of issue 41), :mod:`support.hostile` (the hostile
+plugins of the integrity, sealing and plumbing suites) and :mod:`support.bad_inputs` (every
+bad input of the CLI). A script imports them from here, never from a test file.
 
 (``conftest.py`` keeps the fixtures and the hooks pytest itself reads.)
 """
@@ -27,16 +32,27 @@ import pytest
 from rippleb import JointSpec, Method, make_log
 from rippleb.scoring.metrics import METRIC_COLUMNS
 
-GOOD = textwrap.dedent("""\
+#: A scenario of one move, ``by`` radians of the first joint in ``duration`` seconds, the
+#: elbow at ``posture`` (fill in with :meth:`str.format`, or write it with
+#: :func:`write_move_scenario`).
+MOVE_SCENARIO = textwrap.dedent("""\
     [robot]
-    posture = { elbow_joint = 1.5 }
+    posture = {{ elbow_joint = {posture} }}
     [trajectory]
     start = -1.8
     [[trajectory.segment]]
     kind = "move"
-    by = 0.1
-    duration = 0.2
+    by = {by}
+    duration = {duration}
     """)
+GOOD = MOVE_SCENARIO.format(by=0.1, duration=0.2, posture="1.5")
+
+
+def write_move_scenario(path: Path, by=0.1, duration=0.2, posture="1.5") -> Path:
+    """Write :data:`MOVE_SCENARIO` to ``path`` (its folders made), return ``path``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(MOVE_SCENARIO.format(by=by, duration=duration, posture=posture))
+    return path
 
 def log_frame(n=200, fs=20_000.0):
     t = np.arange(n) / fs

@@ -20,6 +20,9 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     ``.npz`` otherwise). An ``OSError`` becomes an :class:`InputError` naming ``path``.
     """
     path = Path(path)
+    if path.parent.exists() and not path.parent.is_dir():
+        # said before a writer names its temporary file: pyarrow's error quotes that name
+        raise InputError(f"{path}: cannot write: {path.parent} is not a directory")
     # A unique temporary name: two writers of one path never share a temporary file.
     tmp = path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp{path.suffix}")
     try:

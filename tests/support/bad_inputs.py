@@ -113,7 +113,7 @@ def bad_inputs(root: Path) -> dict:
         "output dir under a regular file": ([*run, "--scenarios", "creep", "--out", "a-file/out"], None,
                                             ["a-file/out: cannot write the output directory"]),
         "simulate into a regular file's child": (["simulate", "creep", "--out", "a-file/x.csv"], None,
-                                                 ["a-file/x.csv: cannot write"]),
+                                                 ["a-file/x.csv: cannot write: a-file is not a directory"]),
         "negative seed": ([*run, "--scenarios", "creep", "--seed-start", "-3", *out], None,
                           ["--seed-start must be a non-negative integer"]),
     }

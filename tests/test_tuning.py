@@ -208,6 +208,16 @@ def test_tune_through_the_cli_writes_a_record_and_says_its_verdict(tmp_path):
     assert "methods with something to tune adopt the same point on both sets" in table.stdout
     same = _tune("--compare", out, out)
     assert same.returncode == 2 and "share devices [100]" in same.stderr
+    # a run cut short goes on: the methods the record holds are kept, not tuned again
+    again = _tune("--methods", "lowpass,raw,current-based", "--budget", 3, "--seeds", "100", "--jobs", 1, "--out", out,
+                  "--rule", RULE_ID)
+    assert again.returncode == 0, again.stderr
+    assert "1 method(s)" in again.stderr and "2 already in" in again.stderr
+    grown = json.loads(out.read_text())
+    assert grown["methods"]["lowpass"] == lowpass and set(grown["methods"]) == {"lowpass", "raw", "current-based"}
+    # ... and a record of another protocol is never mixed into this one
+    other_rule = _tune("--methods", "current-based", "--budget", 3, "--seeds", "100", "--jobs", 1, "--out", out)
+    assert other_rule.returncode == 2 and "another protocol" in other_rule.stderr
 
 
 @pytest.mark.parametrize("args, message", [

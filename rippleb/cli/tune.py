@@ -48,8 +48,9 @@ def add_tune(sub) -> None:
                         "published row uses)")
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                    help=f"points evaluated in parallel processes (default: the number of CPUs, {os.cpu_count()} here)")
-    p.add_argument("--out", type=Path, help="JSON file for the record (written after each method); "
-                                            "'rippleb run --tuning FILE' runs the adopted points")
+    p.add_argument("--out", type=Path, help="JSON file for the record (written after each method; a record of "
+                                            "the same protocol is continued: its methods are kept, the rest "
+                                            "tuned); 'rippleb run --tuning FILE' runs the adopted points")
     p.add_argument("--rule", choices=sorted(RULES), default=PROTOCOL_RULE,
                    help=f"the adoption rule (default {PROTOCOL_RULE}, the built-ins' record's): {RULE_ID}: "
                         f"{_help_text(RULES[RULE_ID])} (needs 20 devices, e.g. --seeds {PAIRED_SEEDS[0]}-{PAIRED_SEEDS[-1]}); "
@@ -83,15 +84,18 @@ def cmd_tune(args) -> int:
              else registry.names("builtin"))
     if args.out is not None and args.out.is_dir():
         raise InputError(f"--out {args.out}: is a directory; give a file name (e.g. {args.out / 'tuning.json'})")
-    planned = plan(names, registry, args.budget)
-    total = sum(len(points) for _, points, _ in planned.values())
     record = {"protocol": {"budget": args.budget, "seeds": seeds, "criterion": CRITERION, "rule": RULES[args.rule],
                            "rule_id": args.rule,
                            "sampler": f"the default, then budget-1 points of a scrambled Sobol sequence "
                                       f"(scipy.stats.qmc, seed {SEED}), 3 significant digits"},
               "rippleb_version": __version__, "methods": {}}
-    print(f"rippleb tune: {len(names)} method(s), budget {args.budget}, {total} evaluations on the "
-          f"calibration logs of seeds {args.seeds}, {args.jobs} job(s)", file=sys.stderr, flush=True)
+    done = _finished_methods(args.out, record["protocol"]) if args.out is not None else {}
+    record["methods"].update(done)
+    planned = plan([n for n in names if n not in done], registry, args.budget)
+    total = sum(len(points) for _, points, _ in planned.values())
+    kept = f"; {len(done)} already in {args.out}, kept" if done else ""
+    print(f"rippleb tune: {len(planned)} method(s), budget {args.budget}, {total} evaluations on the "
+          f"calibration logs of seeds {args.seeds}, {args.jobs} job(s){kept}", file=sys.stderr, flush=True)
     with tqdm(total=total, disable=True if args.no_progress else None, file=sys.stderr, unit="point") as bar:
         def finished(name, entry):
             record["methods"][name] = entry
@@ -159,6 +163,21 @@ def parse_seeds(text: str) -> list[int]:
     if not seeds:
         raise InputError(f"--seeds {text!r}: expected at least one seed")
     return select_seeds(seeds, 0)
+
+
+def _finished_methods(path: Path, protocol: dict) -> dict:
+    """The methods a record at ``path`` already holds, tuned by ``protocol``: a tuning run cut
+    short (each method's entry is written as it finishes) goes on where it stopped. A record
+    of another protocol is refused, never mixed into this one."""
+    from rippleb.report.tuning_stability import read
+
+    if not path.exists():
+        return {}
+    saved = read(path)
+    if saved.get("protocol") != protocol:
+        raise InputError(f"--out {path}: a record of another protocol (budget, seeds, rule or sampler) or not a "
+                         f"record; rippleb tune adds to a record of the same protocol only: choose another --out")
+    return saved["methods"]
 
 
 def _write(path: Path, record: dict) -> None:

@@ -49,7 +49,7 @@ TRUTH_FREE_CAVEATS = [
     "noise at other orders) is not seen.",
     "`rest_std_nm` is the estimate's spread while the encoder stands still: a load that changes at "
     "rest counts against every method alike, and an estimate that is steady but wrong looks perfect; "
-    "a quiet estimate is a smoothed one, and on simulated logs its ranking ran against the true "
+    "a quiet estimate is a smoothed one, and on simulated logs its ranking does not follow the true "
     "error's (docs/metrics.md): read it as a noise figure, not as a ranking.",
     "`strain_delay_ms` is the estimate's lag behind the strain in the band where the two are "
     "coherent: the strain's own lag behind the torque is not in it, and a method that ignores "
@@ -59,7 +59,7 @@ TRUTH_FREE_CAVEATS = [
 
 #: What a recorded log is ranked by, best first: the first of these that an ok row has
 #: (``rms_error_rebuilt_nm`` only a log with a model reference has). Not ``rest_std_nm``:
-#: its ranking ran against the true one (docs/metrics.md).
+#: its ranking does not follow the true one (docs/metrics.md).
 RANKING_ORDER = ("rms_error_nm", "rms_error_rebuilt_nm", "rms_error_ref_nm", TRUTH_FREE_RANKING, "strain_delay_ms")
 
 

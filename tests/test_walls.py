@@ -223,6 +223,25 @@ def test_check_names_the_check_a_method_ends_its_process_in(site, tmp_path):
 
 
 @pytest.mark.slow
+def test_a_tuning_point_cannot_reach_the_simulations_it_is_tuned_on(site, monkeypatch):
+    """The issue's tune row: its workers held the full simulations, ``torque_true`` included.
+    A point now runs as a sandboxed row: it cannot list the directory the runner keeps its
+    cache in, so it reads none of it, and its findings reach the record as its error."""
+    from rippleb.engine.tuner import plan, tune
+    from rippleb.registry import Registry
+
+    monkeypatch.syspath_prepend(str(site))
+    monkeypatch.setenv("PYTHONPATH", str(site))
+    monkeypatch.setattr(tempfile, "tempdir", "/tmp")       # the runner's cache where the peeker looks
+    registry = Registry.discover()
+    record = tune(plan(["peeker"], registry, 2), [100], jobs=2, timeout=120, registry=registry)["peeker"]
+    peeks = [e for e in record["errors"] if "PEEK" in e]
+    assert peeks, record["errors"]
+    for peek in peeks:
+        assert "listed=-13 caches=0 files_read=0" in peek, peek      # EACCES: Landlock
+
+
+@pytest.mark.slow
 @pytest.mark.heavy
 def test_a_tuning_point_that_hangs_or_exits_costs_its_own_point(site, monkeypatch):
     """The issue's tune row: each point a sandboxed row under the limits; the record is kept."""

@@ -144,6 +144,21 @@ def case_tune(where: Path, site: Path) -> tuple[str, int, str]:
             + f"; errors: {errors}")
 
 
+def case_tune_peek(where: Path, site: Path) -> tuple[str, int, str]:
+    """A tuning point that looks for the simulations it is tuned on, through the CLI."""
+    import os
+
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]),
+           "RIPPLEB_KEY_FILE": str(where / "key")}
+    env.pop("TMPDIR", None)                     # the runner's cache in /tmp, where the peeker looks
+    proc = subprocess.run([sys.executable, "-m", "rippleb", "tune", "--methods", "peeker", "--budget", "2",
+                           "--seeds", "100", "--jobs", "2", "--no-progress", "--out", "t.json"],
+                          capture_output=True, text=True, env=env, cwd=where, timeout=1200)
+    errors = json.loads((where / "t.json").read_text())["methods"]["peeker"]["errors"]
+    return ("`rippleb tune --methods peeker --budget 2 --seeds 100` (its fit lists `/tmp` for the runner's "
+            "`rippleb-cache-*` and reads every file in them)", proc.returncode, f"errors: {errors}")
+
+
 def case_forgers(where: Path, site: Path) -> tuple[str, int, str]:
     proc = walls_cli(where, site, "run", "--methods", "raw,clockstopper,framer,huge", *RUN, "--jobs", "2", "--out", "run")
     rows = rows_by_method(where / "run")
@@ -227,6 +242,7 @@ CASES = {
     "check-hang": lambda w, s: case_check(w, s, "hanger"),
     "check-exit": lambda w, s: case_check(w, s, "exiter"),
     "tune": case_tune,
+    "tune-peek": case_tune_peek,
     "forgers": case_forgers,
     "fat": lambda w, s: case_fat(w, s, "4096"),
     "fat-tight": lambda w, s: case_fat(w, s, "400"),

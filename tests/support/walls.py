@@ -216,9 +216,29 @@ WALLS_PROBER = textwrap.dedent(r'''
             if self.x < 0.2:
                 os._exit(3)
             return block.strain * self.x
+
+    class Peeker(Method):
+        """A tuning point that looks for the simulations it is tuned on (their truth included):
+        the runner's cache directories (``rippleb-cache-*``) in ``/tmp``, where a runner
+        without ``$TMPDIR`` keeps them, and every file in them."""
+        name = "peeker"
+        tunable = {"x": (0.0, 1.0, "linear")}
+        def __init__(self, x=0.5):
+            self.x = x
+        def fit(self, calibration):
+            import glob
+            where = "/tmp"
+            listed = _list(where)
+            found = glob.glob(os.path.join(where, "rippleb-cache-*", "**"), recursive=True)
+            read = [_read(p) for p in found if os.path.isfile(p)]
+            raise RuntimeError("PEEK listed=%d caches=%d files_read=%d" % (
+                listed, len([p for p in found if os.path.basename(os.path.dirname(p)).startswith("rippleb-cache-")]),
+                len([n for n in read if n and n > 0])))
+        def step(self, block):
+            return block.strain * self.x
 ''')
 WALLS_METHODS = {"prober": "Prober", "clockstopper": "Clockstopper", "framer": "Framer", "huge": "Huge", "fat": "Fat",
-                 "hanger": "Hanger", "exiter": "Exiter", "wobbly": "Wobbly"}
+                 "hanger": "Hanger", "exiter": "Exiter", "wobbly": "Wobbly", "peeker": "Peeker"}
 
 
 def walls_cli(cwd, site, *args, env=None, stdin=None, user=None):

@@ -56,7 +56,7 @@ SPEED_WINDOW_S = 0.01
 #: 0.8-0.9 under realistic). Measured at 2, 3, 4 and 6 revolutions on those devices:
 #: 13.7 / 3.8 / 2.5 / 2.2 Nm and 7.4 / 0.75 / 0.76 / 0.78 Nm (tests/test_rebuilt.py holds the
 #: first); joints of ratio 100 and 160, whose slow part covers more than 4 revolutions, read
-#: within 0.04 Nm of the same at 2, 4 and 6.
+#: within 0.06 Nm of the same at 2, 4 and 6 (panel devices 3000-3001).
 MIN_REVOLUTIONS = 4.0
 #: Relative ridge on the fit's normal equations (columns scaled to unit RMS): it keeps a
 #: regressor that the log does not excite (a load that never changes) from blowing up.

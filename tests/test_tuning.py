@@ -272,3 +272,13 @@ def test_a_plugin_without_ranges_is_scored_at_its_defaults_once():
     planned = plan(["plain", "undeclared"], _Registry(plain=plain, undeclared=undeclared), 16)
     assert planned["plain"][1] == [{}] and "nothing to tune" in planned["plain"][2]
     assert planned["undeclared"][1] == [{}] and "no tunable ranges" in planned["undeclared"][2]
+
+
+def test_the_tuning_plan_runs_method_by_method_so_a_cut_short_tuning_keeps_whole_methods():
+    """The scheduler starts rows in the plan's order: each method's points on every device
+    come before the next method's, so its entry is recorded (and kept by ``--out``) early."""
+    from rippleb.engine.tuner import tuning_plan
+
+    labels = ["a[x=1]", "a[x=2]", "b[y=1]"]
+    order = [key.method for key in tuning_plan(labels, [100, 101, 102]).rows]
+    assert order == ["a[x=1]"] * 3 + ["a[x=2]"] * 3 + ["b[y=1]"] * 3

@@ -123,11 +123,16 @@ def tuning_plan(labels: list[str], seeds):
     calibration = load_scenario(CALIBRATION)
     content = scenario_hash(calibration)
     plan = Plan(calibration_label=CALIBRATION)
-    for seed in seeds:
-        fitting, scored = (Case(CALIBRATION, content, DEFAULT_CONDITION, seed, role) for role in (FITTING, SCORED))
+    cases = {seed: [Case(CALIBRATION, content, DEFAULT_CONDITION, seed, role) for role in (FITTING, SCORED)]
+             for seed in seeds}
+    for fitting, scored in cases.values():
         plan.add_sim(calibration, fitting)
         plan.add_sim(calibration, scored)
-        for lab in labels:
+    # method by method (the scheduler starts rows in this order): each method's entry is
+    # recorded as soon as its points are done on every device, so a tuning cut short keeps
+    # the methods it finished (``rippleb tune --out`` goes on from them)
+    for lab in labels:
+        for seed, (fitting, scored) in cases.items():
             plan.add_row(RowKey(lab, CALIBRATION, DEFAULT_CONDITION, seed), scored, fitting)
     return plan
 

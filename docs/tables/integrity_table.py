@@ -104,26 +104,24 @@ def _recording(path: Path, n=40_000, fs=20_000.0, t_scale=1.0):
 # ----------------------------------------------------------------------------- the cases
 
 
-def rows_mixed_space_underscore(c):
-    c.scenario("a b.toml", by=0.1)
-    c.scenario("a_b.toml", by=0.05)
-    code, err = c.cli(*RUN, "--methods", "raw", "--scenarios", "a b.toml,a_b.toml", "--out", "out")
+def _two_files(c, first: str, second: str):
+    """Two scenario files whose names a careless key would mix, run together: their rows."""
+    c.scenario(first, by=0.1)
+    c.scenario(second, by=0.05)
+    code, err = c.cli(*RUN, "--methods", "raw", "--scenarios", f"{first},{second}", "--out", "out")
     return code, err if code else _short(c.rows())
+
+
+def rows_mixed_space_underscore(c):
+    return _two_files(c, "a b.toml", "a_b.toml")
 
 
 def rows_mixed_emoji(c):
-    c.scenario("\N{SLIGHTLY SMILING FACE}.toml", by=0.1)
-    c.scenario("\N{UPSIDE-DOWN FACE}.toml", by=0.05)
-    code, err = c.cli(*RUN, "--methods", "raw", "--scenarios",
-                      "\N{SLIGHTLY SMILING FACE}.toml,\N{UPSIDE-DOWN FACE}.toml", "--out", "out")
-    return code, err if code else _short(c.rows())
+    return _two_files(c, "\N{SLIGHTLY SMILING FACE}.toml", "\N{UPSIDE-DOWN FACE}.toml")
 
 
 def rows_mixed_same_stem(c):
-    c.scenario("d1/x.toml", by=0.1)
-    c.scenario("d2/x.toml", by=0.05)
-    code, err = c.cli(*RUN, "--methods", "raw", "--scenarios", "d1/x.toml,d2/x.toml", "--out", "out")
-    return code, err if code else _short(c.rows())
+    return _two_files(c, "d1/x.toml", "d2/x.toml")
 
 
 def rows_mixed_builtin_shadow(c):

@@ -36,6 +36,16 @@ def site(tmp_path_factory):
     return where
 
 
+@pytest.fixture
+def registry(site, monkeypatch):
+    """The registry with the hostile plugin on the path of this process and of the jobs it forks."""
+    from rippleb.registry import Registry
+
+    monkeypatch.syspath_prepend(str(site))
+    monkeypatch.setenv("PYTHONPATH", str(site))
+    return Registry.discover()
+
+
 
 def _assert_walls_held(found: dict, listener=None, readable_package=True) -> None:
     import errno
@@ -223,17 +233,13 @@ def test_check_names_the_check_a_method_ends_its_process_in(site, tmp_path):
 
 
 @pytest.mark.slow
-def test_a_tuning_point_cannot_reach_the_simulations_it_is_tuned_on(site, monkeypatch):
+def test_a_tuning_point_cannot_reach_the_simulations_it_is_tuned_on(registry, monkeypatch):
     """The issue's tune row: its workers held the full simulations, ``torque_true`` included.
     A point now runs as a sandboxed row: it cannot list the directory the runner keeps its
     cache in, so it reads none of it, and its findings reach the record as its error."""
     from rippleb.engine.tuner import plan, tune
-    from rippleb.registry import Registry
 
-    monkeypatch.syspath_prepend(str(site))
-    monkeypatch.setenv("PYTHONPATH", str(site))
     monkeypatch.setattr(tempfile, "tempdir", "/tmp")       # the runner's cache where the peeker looks
-    registry = Registry.discover()
     record = tune(plan(["peeker"], registry, 2), [100], jobs=2, timeout=120, registry=registry)["peeker"]
     peeks = [e for e in record["errors"] if "PEEK" in e]
     assert peeks, record["errors"]
@@ -243,14 +249,10 @@ def test_a_tuning_point_cannot_reach_the_simulations_it_is_tuned_on(site, monkey
 
 @pytest.mark.slow
 @pytest.mark.heavy
-def test_a_tuning_point_that_hangs_or_exits_costs_its_own_point(site, monkeypatch):
+def test_a_tuning_point_that_hangs_or_exits_costs_its_own_point(registry):
     """The issue's tune row: each point a sandboxed row under the limits; the record is kept."""
     from rippleb.engine.tuner import plan, tune
-    from rippleb.registry import Registry
 
-    monkeypatch.syspath_prepend(str(site))
-    monkeypatch.setenv("PYTHONPATH", str(site))
-    registry = Registry.discover()
     planned = plan(["wobbly"], registry, 4)
     xs = [p["x"] for p in planned["wobbly"][1]]
     assert any(x > 0.8 for x in xs) and any(x < 0.2 for x in xs), xs   # the seed's points hit both

@@ -175,8 +175,8 @@ def _finished_methods(path: Path, protocol: dict) -> dict:
         return {}
     saved = read(path)
     if saved.get("protocol") != protocol:
-        raise InputError(f"--out {path}: a record of another protocol (budget, seeds, rule or sampler) or not a "
-                         f"record; rippleb tune adds to a record of the same protocol only: choose another --out")
+        raise InputError(f"--out {path}: a record of another protocol (budget, seeds, rule or sampler); rippleb "
+                         f"tune adds to a record of the same protocol only: choose another --out")
     return saved["methods"]
 
 

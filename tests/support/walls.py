@@ -227,13 +227,10 @@ WALLS_PROBER = textwrap.dedent(r'''
             self.x = x
         def fit(self, calibration):
             import glob
-            where = "/tmp"
-            listed = _list(where)
-            found = glob.glob(os.path.join(where, "rippleb-cache-*", "**"), recursive=True)
-            read = [_read(p) for p in found if os.path.isfile(p)]
-            raise RuntimeError("PEEK listed=%d caches=%d files_read=%d" % (
-                listed, len([p for p in found if os.path.basename(os.path.dirname(p)).startswith("rippleb-cache-")]),
-                len([n for n in read if n and n > 0])))
+            caches = glob.glob("/tmp/rippleb-cache-*")
+            files = [p for c in caches for p in glob.glob(os.path.join(c, "**"), recursive=True) if os.path.isfile(p)]
+            read = sum(1 for p in files if (_read(p) or 0) > 0)
+            raise RuntimeError("PEEK listed=%d caches=%d files_read=%d" % (_list("/tmp"), len(caches), read))
         def step(self, block):
             return block.strain * self.x
 ''')

@@ -221,13 +221,10 @@ TREE_ORDER = ("scoring", "simulator", "engine", "report", "cli")
 GENERATED = {"_version.py"}
 
 
-def _lines(path: Path) -> int:
-    return len(path.read_text().splitlines())
-
-
 def _tree_entries(folder: Path, prefix: str) -> list[str]:
-    """The tree lines of ``folder``'s modules and subfolders (sorted by name), each module
-    with its line count: the listing in docs/architecture.md."""
+    """The tree lines of ``folder``'s modules and subfolders (sorted by name): the listing
+    in docs/architecture.md. No line counts: they went stale with every change of code, and
+    the length limit is :func:`test_no_module_is_longer_than_the_limit`'s."""
     children = sorted([p for p in folder.iterdir() if p.suffix == ".py" or
                        (p.is_dir() and (p / "__init__.py").exists())], key=lambda p: p.name)
     out = []
@@ -238,17 +235,17 @@ def _tree_entries(folder: Path, prefix: str) -> list[str]:
             out.append(f"{prefix}{branch}{child.name}/".ljust(31) + layer(module_name(child / "__init__.py")))
             out += _tree_entries(child, prefix + inner)
         else:
-            out.append(f"{prefix}{branch}{child.name}".ljust(27) + f"{_lines(child):4d}")
+            out.append(f"{prefix}{branch}{child.name}")
     return out
 
 
 def package_tree(root: Path = ROOT) -> str:
     """docs/architecture.md's tree of the package: the top-level modules with their layer,
-    then each subpackage (:data:`TREE_ORDER`) with its modules' line counts."""
+    then each subpackage (:data:`TREE_ORDER`) with its modules."""
     top = sorted(p for p in root.glob("*.py") if p.name not in GENERATED)
     lines = [f"{root.name}/"]
     for path in top:
-        lines.append(f"├── {path.name}".ljust(27) + f"{_lines(path):4d}  {layer(module_name(path, root))}")
+        lines.append(f"├── {path.name}".ljust(33) + layer(module_name(path, root)))
     folders = [root / name for name in TREE_ORDER]
     for i, folder in enumerate(folders):
         last = i == len(folders) - 1
@@ -268,7 +265,7 @@ DOC = ROOT.parent / "docs" / "architecture.md"
 
 
 def test_the_documented_tree_is_the_package():
-    """docs/architecture.md's tree (modules, layers, line counts) is the source's:
+    """docs/architecture.md's tree (modules and layers) is the source's:
     ``python tests/test_architecture.py`` rewrites it after a change."""
     assert _documented_tree(DOC) == package_tree(), "run: python tests/test_architecture.py"
 

@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from rippleb.errors import InputError
+from rippleb.files import atomic_path
 from rippleb.tuning import (BUDGET, CRITERION, EVERY_DEVICE, PAIRED_SEEDS, PROTOCOL_RULE, RULE_ID, RULES, SEED,
                              SEEDS)
 
@@ -181,9 +182,6 @@ def _finished_methods(path: Path, protocol: dict) -> dict:
 
 
 def _write(path: Path, record: dict) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    try:
+    """The record, replaced whole (a tune cut short leaves the last method's record, never half)."""
+    with atomic_path(path) as tmp:
         tmp.write_text(json.dumps(record, indent=1, sort_keys=False) + "\n")
-        os.replace(tmp, path)
-    except OSError as exc:
-        raise InputError(f"--out {path}: cannot write the record: {exc.strerror or exc}") from None

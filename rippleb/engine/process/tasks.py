@@ -12,9 +12,14 @@ memory limit, which binds each process alone. Two of the kernel's mechanisms cap
   not apply it to root (``INIT_USER``), which is where the group is there instead.
 
 The keeper stays in its group to the end; the process that reaps it removes the group
-(:func:`remove`). Moving a process into a group is the costly step (an RCU grace period on a
-cgroup v1 hierarchy: 14 ms measured, ``benchmarks/confine_overhead.py --steps``), so each job
-moves once, and where ``RLIMIT_NPROC`` binds (any user but root) no group is made at all.
+(:func:`remove`). Where ``RLIMIT_NPROC`` binds (any user but root) no group is made at all.
+
+Moving a process into a group through ``cgroup.procs`` takes the kernel's lock of every
+thread group, whose first writer waits for an RCU grace period: 11-18 ms of wall time per
+job on the cgroup v1 hierarchy of the 2-core machine (2026-11-27), during which the job's
+slot runs nothing. On a v1 hierarchy the keeper writes ``0`` to ``tasks`` instead, which
+moves the calling thread alone and takes no such lock (0.1 ms): a keeper just forked is one
+thread, so that thread is the whole process, and whatever it forks starts in the group.
 """
 
 from __future__ import annotations
@@ -80,12 +85,22 @@ def enter(limit: int) -> str | None:
         return None
     try:
         _write(os.path.join(group, "pids.max"), str(limit))
-        _write(os.path.join(group, "cgroup.procs"), str(os.getpid()))
+        _join(group)
     except OSError:
         with contextlib.suppress(OSError):
             os.rmdir(group)
         return None
     return group
+
+
+def _join(group: str) -> None:
+    """Move this process into ``group``: through v1's ``tasks`` (this thread, no grace period:
+    module docstring) when this process is one thread, else through ``cgroup.procs``."""
+    tasks = os.path.join(group, "tasks")
+    if os.path.exists(tasks) and len(os.listdir("/proc/self/task")) == 1:
+        _write(tasks, "0")
+    else:
+        _write(os.path.join(group, "cgroup.procs"), str(os.getpid()))
 
 
 def remove(pid: int) -> None:

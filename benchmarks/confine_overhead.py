@@ -21,10 +21,10 @@ noise on a shared machine, these are not.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import functools
 import statistics
-import sys
 import tempfile
 import time
 
@@ -124,10 +124,16 @@ def steps(forks: int) -> None:
 
 
 def main() -> None:
-    if sys.argv[1:2] == ["--steps"]:
-        steps(int(sys.argv[2]) if len(sys.argv) > 2 else 40)
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("count", nargs="?", type=int, help="trivial jobs (default 400), or with --steps "
+                        "forks per step (default 40)")
+    parser.add_argument("--steps", action="store_true", help="time each of issue 41's steps in a fresh fork")
+    args = parser.parse_args()
+    if args.steps:
+        steps(args.count or 40)
         return
-    jobs = int(sys.argv[1]) if len(sys.argv) > 1 else 400
+    jobs = args.count or 400
     run_dir = tempfile.mkdtemp(prefix="rippleb-confine-")
     # as a run confines a method's job: its run directory read-only, a scratch directory of the run's
     confine = Confinement.of([run_dir], [], tempfile.mkdtemp(prefix="rippleb-scratch-"))

@@ -102,7 +102,13 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--scenario", default="paper-quintic")
     parser.add_argument("--cases", default="2,12", help="K1,K2: the two numbers of cases")
     parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--huge-pages", choices=("on", "off"), default="on",
+                        help="off: the fork server keeps its 4 KiB pages (rippleb/engine/process/hugepages.py), "
+                             "to measure what the 2 MiB ones save")
     args = parser.parse_args(argv)
+    if args.huge_pages == "off":
+        from rippleb.engine.process import hugepages
+        hugepages.collapse_private_memory = lambda: 0
     registry = Registry.discover()
     methods = (sorted(n for n, e in registry.entries.items() if e.origin == "builtin")
                if args.methods == "builtins" else args.methods.split(","))

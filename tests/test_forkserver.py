@@ -1,9 +1,12 @@
 """The fork server: jobs run from it, not from the runner, and it ends with the run."""
 
+import hashlib
 import os
 
+import numpy as np
 import pytest
 
+from rippleb.engine.process import hugepages
 from rippleb.engine.process.forkserver import ForkServer
 from rippleb.engine.process.pool import Pool
 
@@ -60,3 +63,45 @@ def test_a_job_that_raises_is_a_status_through_the_server():
     with ForkServer.start(None) as server:
         fin = _run_one(Pool(1, server=server), raises)
     assert fin.kind == "raised" and "bad input in a job" in fin.value
+
+
+# The server's memory is re-mapped by 2 MiB pages before its first job
+# (rippleb/engine/process/hugepages.py): the bytes a job inherits, and the privacy of
+# what it writes, must be those of plain 4 KiB pages. 16 MiB spans whole 2 MiB pages.
+INHERITED = np.random.default_rng(7).integers(0, 2**63, size=2 << 20, dtype=np.uint64)
+INHERITED_DIGEST = hashlib.sha256(INHERITED.tobytes()).hexdigest().encode()
+
+
+def digest_then_scribble(context):
+    """A job: the digest of what it inherited, then it overwrites every byte of it."""
+    seen = hashlib.sha256(INHERITED.tobytes()).hexdigest().encode()
+    INHERITED[:] = 0
+    return seen
+
+
+def test_jobs_inherit_the_servers_bytes_and_what_one_writes_stays_its_own():
+    with ForkServer.start(None) as server:
+        pool = Pool(1, server=server)
+        first, second = _run_one(pool, digest_then_scribble), _run_one(pool, digest_then_scribble)
+    assert first.kind == second.kind == "done", (first, second)
+    assert first.value == second.value == INHERITED_DIGEST
+
+
+def test_collapsing_changes_no_byte_and_a_childs_write_stays_the_childs():
+    data = np.random.default_rng(8).integers(0, 2**63, size=2 << 20, dtype=np.uint64)
+    before = hashlib.sha256(data.tobytes()).hexdigest()
+    assert hugepages.collapse_private_memory() >= 0   # 0 where the kernel offers no 2 MiB pages
+    assert hashlib.sha256(data.tobytes()).hexdigest() == before
+    pid = os.fork()
+    if pid == 0:
+        data[:] = 0
+        os._exit(0 if not data.any() else 1)
+    assert os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) == 0
+    assert hashlib.sha256(data.tobytes()).hexdigest() == before
+
+
+def test_only_whole_2mib_pages_of_anonymous_private_memory_are_collapsed():
+    ranges = hugepages._aligned_private_ranges()
+    assert ranges, "an interpreter has a heap and anonymous mappings"
+    for start, end in ranges:
+        assert start % hugepages.HUGE_PAGE == 0 and end % hugepages.HUGE_PAGE == 0 and end > start

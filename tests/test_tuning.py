@@ -13,7 +13,7 @@ from rippleb.engine.tuner import entry, plan
 from rippleb.errors import PluginError
 from rippleb.registry import Registry
 from rippleb.report.tuning_table import tuning_markdown
-from rippleb.tuning import (BUDGET, PAIRED_SEEDS, PROTOCOL_RULE, RULE_ID, SEEDS, adopted, candidates, check_tunable, pvalues,
+from rippleb.tuning import (BUDGET, EVERY_DEVICE, PAIRED_SEEDS, PROTOCOL_RULE, RULE_ID, SEEDS, adopted, candidates, check_tunable, pvalues,
                             read_record, replaces_default, rule_of, summary)
 
 RANGES = {"a": (1e-3, 10.0, "log"), "b": (-1.0, 1.0, "linear"), "n": (2, 9, "int")}
@@ -216,7 +216,8 @@ def test_tune_through_the_cli_writes_a_record_and_says_its_verdict(tmp_path):
     grown = json.loads(out.read_text())
     assert grown["methods"]["lowpass"] == lowpass and set(grown["methods"]) == {"lowpass", "raw", "current-based"}
     # ... and a record of another protocol is never mixed into this one
-    other_rule = _tune("--methods", "current-based", "--budget", 3, "--seeds", "100", "--jobs", 1, "--out", out)
+    other_rule = _tune("--methods", "current-based", "--budget", 3, "--seeds", "100", "--jobs", 1, "--out", out,
+                       "--rule", EVERY_DEVICE)
     assert other_rule.returncode == 2 and "another protocol" in other_rule.stderr
 
 

@@ -140,6 +140,23 @@ def test_published_run_covers_every_builtin_method_scored_scenario_and_condition
     assert not short, f"the published run needs at least {MIN_SEEDS} seeds of each:\n" + "\n".join(short)
 
 
+def test_every_published_method_ran_at_todays_defaults():
+    """A built-in's defaults are what its published rows ran: a default moved (a re-tuning,
+    docs/tuning.md) without a new publication fails here for every method, not only for the
+    few rows the bit-for-bit check above re-runs."""
+    from rippleb.harness import params_json
+
+    published = _published()
+    registry = Registry.discover()
+    stale = []
+    for name in registry.names("builtin"):
+        ran = set(published.loc[published["method"] == name, "params"])
+        today = params_json(registry.get(name).load()())
+        if ran != {today}:
+            stale.append(f"{name}: published {sorted(ran)}, today {today}")
+    assert not stale, "results/ ran other defaults; regenerate it (docs/report.md):\n" + "\n".join(stale)
+
+
 def test_published_readme_tables_are_generated_from_the_published_rows():
     published = _published()
     readme = (RESULTS / "README.md").read_text()

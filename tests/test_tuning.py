@@ -2,6 +2,7 @@
 
 import inspect
 import json
+from pathlib import Path
 import subprocess
 import sys
 
@@ -168,6 +169,23 @@ def test_every_builtin_runs_with_the_values_its_tuning_adopted():
         defaults = cls().get_params()
         assert {p: defaults[p] for p in cls.tunable} == method["adopted"], \
             f"{name}: set its defaults to the adopted point {method['adopted']} of methods/tuning.json"
+
+
+STABILITY = Path(__file__).resolve().parent.parent / "docs" / "tuning-stability"
+TUNING_DOC = STABILITY.parent / "tuning.md"
+
+
+def test_the_stability_table_is_what_compare_prints():
+    """docs/tuning.md's stability table is what ``rippleb tune --compare`` prints for the two
+    records of docs/tuning-stability/, and the built-ins' record is the first of them
+    (docs/tuning.md, "Re-tuning after a change of the physics")."""
+    from rippleb.report.tuning_stability import read, stability_markdown
+
+    first, second = (read(STABILITY / name) for name in ("100-119.json", "5000-5019.json"))
+    assert first == RECORD, "methods/tuning.json is not docs/tuning-stability/100-119.json"
+    assert second["protocol"] == {**first["protocol"], "seeds": list(range(5000, 5020))}
+    assert stability_markdown(first, second) in TUNING_DOC.read_text(), \
+        "docs/tuning.md's stability table is stale: paste what 'rippleb tune --compare' prints"
 
 
 def test_a_run_records_the_tuning_and_its_report_prints_it():

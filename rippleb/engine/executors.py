@@ -104,6 +104,8 @@ def run_task(task: RowTask, cache: Path, registry, memo: dict | None = None, ser
 
 def _restore(state, memo: dict) -> None:
     """Take the simulations and fits an earlier row of this process left."""
+    from rippleb.engine.scheduler import release_rows
+
     for sim, (_, roles) in state.plan.sims.items():
         known = [memo.get(Case(*sim, role)) for role in roles]
         if not all(k is not None and Path(k[0].path).is_file() for k in known):
@@ -120,6 +122,7 @@ def _restore(state, memo: dict) -> None:
             if lengths is not None:
                 state.lengths[c] = lengths
         state.sims[sim] = "done"
+        release_rows(state, sim)
     for fit in state.fits:
         info = memo.get(fit)
         if info is not None and Path(info["fitted"]["path"]).is_file():

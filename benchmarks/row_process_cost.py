@@ -48,7 +48,8 @@ def run_cases(registry, methods: list[str], log, truth, calibration, n_cases: in
     from rippleb.engine.process.pool import Pool
     from rippleb.engine.results import ResultsFile
     from rippleb.engine.rows import CALIBRATION, FITTING, SCORED, Case, RowKey
-    from rippleb.engine.scheduler import Plan, State, prepare_cases, schedule
+    from rippleb.engine.plan import Plan, State, prepare_cases
+    from rippleb.engine.scheduler import schedule
     from rippleb.simulator.conditions import DEFAULT_CONDITION
 
     plan = Plan(calibration_label=CALIBRATION)

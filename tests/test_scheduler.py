@@ -7,7 +7,8 @@ from pathlib import Path
 from rippleb.engine.cache import Artefact
 from rippleb.engine.results import ResultsFile
 from rippleb.engine.rows import FITTING, SCORED, Case, RowKey
-from rippleb.engine.scheduler import Fit, Plan, State, _start_next, prepare_cases, release_rows
+from rippleb.engine.plan import Fit, Plan, State, prepare_cases, release_rows
+from rippleb.engine.scheduler import _start_next
 from rippleb.registry import Registry
 
 

@@ -75,7 +75,8 @@ def run_task(task: RowTask, cache: Path, registry, memo: dict | None = None, ser
     dict
         The row's fields without its key columns, with the system information of this machine.
     """
-    from rippleb.engine.scheduler import Plan, State, prepare_cases, schedule
+    from rippleb.engine.plan import Plan, State, prepare_cases
+    from rippleb.engine.scheduler import schedule
 
     key = task.key
     cal_hash = task.calibration_hash or scenario_hash(task.calibration)
@@ -104,7 +105,7 @@ def run_task(task: RowTask, cache: Path, registry, memo: dict | None = None, ser
 
 def _restore(state, memo: dict) -> None:
     """Take the simulations and fits an earlier row of this process left."""
-    from rippleb.engine.scheduler import release_rows
+    from rippleb.engine.plan import release_rows
 
     for sim, (_, roles) in state.plan.sims.items():
         known = [memo.get(Case(*sim, role)) for role in roles]

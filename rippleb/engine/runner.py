@@ -55,7 +55,8 @@ from rippleb.engine.results import (MEASURED, ResultsFile, RunWarning, row_key, 
 from rippleb.engine.rows import (CALIBRATION, FITTING, MAX_SEEDS, SCORED, Case, RowKey, check_rows, scenario_hash,
                                  select_conditions, select_scenarios, select_seeds, split_names)
 from rippleb.engine.rundir import log_dir, read_config, run_dir
-from rippleb.engine.scheduler import Plan, State, prepare_cases, progress_bar, record, say_retried, schedule
+from rippleb.engine.plan import Plan, State, prepare_cases
+from rippleb.engine.scheduler import progress_bar, record, say_retried, schedule
 
 __all__ = ["run", "run_log", "resolve_methods", "read_config", "check_scenario", "evaluate",
            "default_out_dir", "DEFAULT_SEEDS", "MAX_SEEDS", "DEFAULT_TIMEOUT_S", "DEFAULT_MEMORY_MB"]
@@ -326,8 +327,7 @@ def _run_rows(registry, plan: Plan, results: ResultsFile, out_dir, *, resume, jo
     if resume:
         say_retried(results.drop_environmental(), out_dir)
     done = results.done_keys()
-    # Case-major order: the rows of one simulated log run together, so its truth is
-    # released soon and memory stays bounded by the cases in flight, not the whole run.
+    # Case-major: a log's rows run together, so memory holds the truths of the cases in flight.
     rows = sorted((k for k in plan.rows if row_key(k.fields()) not in done),
                   key=lambda k: (k.seed, k.scenario, k.extra, k.condition, k.method))
     if resume and rows:

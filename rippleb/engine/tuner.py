@@ -116,7 +116,7 @@ def tuning_plan(labels: list[str], seeds):
     """The rows of a tuning: each variant label on each tuning device, fitted on that
     device's calibration log and scored on the same session (one simulation, both roles)."""
     from rippleb.engine.rows import CALIBRATION, FITTING, SCORED, Case, RowKey, scenario_hash
-    from rippleb.engine.scheduler import Plan
+    from rippleb.engine.plan import Plan
     from rippleb.simulator.scenario import load_scenario
     from rippleb.simulator.conditions import DEFAULT_CONDITION
 

@@ -66,7 +66,7 @@ def restream(methods, scenarios, seed: int, timeout: float | None = None,
 
     from rippleb.engine.rows import CALIBRATION, FITTING, SCORED, Case, RowKey, scenario_hash
     from rippleb.engine.runner import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, fork_server, run_plan
-    from rippleb.engine.scheduler import Plan
+    from rippleb.engine.plan import Plan
     from rippleb.registry import Registry
     from rippleb.scoring.metrics import Truth
     from rippleb.simulator import simulate

@@ -206,7 +206,14 @@ def stopped_tune(where: Path, signum: int, after_s: float = 12.0) -> tuple[int, 
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
         time.sleep(after_s)
-        family = [proc.pid] + [child.pid for child in psutil.Process(proc.pid).children(recursive=True)]
+        # a loaded machine may not have started the points yet (CI once found no child at 12 s
+        # beside a publication): wait for its processes, within a bound no load reaches
+        deadline = time.monotonic() + 120
+        while True:
+            family = [proc.pid] + [child.pid for child in psutil.Process(proc.pid).children(recursive=True)]
+            if len(family) > 1 or time.monotonic() > deadline or proc.poll() is not None:
+                break
+            time.sleep(0.2)
         start = time.monotonic()
         os.kill(proc.pid, signum)
         code = proc.wait(timeout=300)

@@ -99,8 +99,8 @@ def main() -> None:
                     scheduler.release_rows(state, key)
             elif isinstance(key, scheduler.Fit):
                 state.fits[key] = {"status": "ok"}
-                for row in getattr(state, "after_fit", {}).pop(key, ()):
-                    state.startable[row] = None
+                if hasattr(scheduler, "release_fit"):
+                    scheduler.release_fit(state, key)
             else:
                 scheduler._record(state, key, _NoBar(), status="ok")
     print(f"{len(plan.rows)} rows, {jobs} jobs: {spent:.2f} CPU s choosing them, {spent / jobs * 1e6:.1f} us a job")

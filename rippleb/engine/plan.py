@@ -4,6 +4,7 @@ logs have settled (:mod:`rippleb.engine.scheduler` runs the jobs)."""
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -71,7 +72,7 @@ class State:
     startable: dict = field(default_factory=dict)   # RowKey -> None: both its logs settled, in order
     blocked: dict = field(default_factory=dict)     # Case -> [RowKey]: rows waiting for its simulation
     after_fit: dict = field(default_factory=dict)   # Fit -> [RowKey]: rows waiting for a running fit
-    sim_order: list = field(default_factory=list)   # sim keys, in the order the rows first need them
+    sim_order: deque = field(default_factory=deque)  # sim keys, in the order the rows first need them
 
 
 def prepare_cases(state: State) -> None:
@@ -91,7 +92,7 @@ def prepare_cases(state: State) -> None:
     first_need = dict.fromkeys(sim_key(c) for key in state.pending for c in reversed(state.plan.rows[key])
                                if c not in state.plan.ready)
     state.sims = dict.fromkeys(first_need, "pending")
-    state.sim_order = list(first_need)
+    state.sim_order = deque(first_need)
     state.fits = {Fit(k.method, state.plan.rows[k][1]): "pending" for k in state.pending}
     for key in state.pending:
         case = state.plan.rows[key][0]
@@ -114,6 +115,13 @@ def release_rows(state: State, sim: tuple) -> None:
         for key in state.blocked.pop(Case(*sim, role), ()):
             if key in state.pending and all(_settled(state, c) for c in state.plan.rows[key]):
                 state.startable[key] = None
+
+
+def release_fit(state: State, fit: Fit) -> None:
+    """Make startable again the rows that waited for the fit ``fit``, which has ended."""
+    for key in state.after_fit.pop(fit, ()):
+        if key in state.pending:
+            state.startable[key] = None
 
 
 def _settled(state: State, case: Case) -> bool:

@@ -26,7 +26,8 @@ from rippleb.engine.results import ENVIRONMENT, RunWarning, system_info
 from rippleb.engine.rows import SCORED, Case, RowKey
 from rippleb.engine.outcomes import environment_first, row_fields, why
 from rippleb.engine.sealing import SEALED_COLUMN
-from rippleb.engine.plan import Fit, Plan, State, prepare_cases, release_rows, sim_key  # noqa: F401 - re-exported
+from rippleb.engine.plan import (Fit, Plan, State, prepare_cases, release_fit, release_rows,  # noqa: F401 - re-exported
+                                 sim_key)
 
 
 def say_retried(dropped: list[dict], out_dir) -> None:
@@ -65,8 +66,7 @@ def schedule(pool: Pool, state: State, bar) -> None:
                     _finish_sim(fin, state)
                 elif isinstance(fin.key, Fit):
                     state.fits[fin.key] = _fit_outcome(fin, state)
-                    for key in state.after_fit.pop(fin.key, ()):
-                        state.startable[key] = None
+                    release_fit(state, fin.key)
                 else:
                     finished_rows.append(fin)
     finally:
@@ -115,7 +115,7 @@ def _start_next(pool: Pool, state: State, bar) -> bool:
                     max_bytes=24 * n_samples + 2**20, confine=_confined(state, key.method))
         return True
     while state.sim_order:
-        sim = state.sim_order.pop(0)
+        sim = state.sim_order.popleft()
         if state.sims[sim] == "pending":
             state.sims[sim] = "running"
             scenario, roles = state.plan.sims[sim]

@@ -183,11 +183,11 @@ class CurrentBased(Method):
     cutoff
         Cut-off of the output low-pass [Hz]; 130 Hz in the paper.
     velocity_cutoff, accel_cutoff
-        Cut-offs of the encoder velocity and acceleration low-passes [Hz] (87.8 and 7.3:
-        the one tuning protocol's, ``methods/tuning.json``).
+        Cut-offs of the encoder velocity and acceleration low-passes [Hz] (60.2 and 22.5:
+        the point the one tuning protocol adopted, ``methods/tuning.json``).
     sign_width
         Motor velocity [rad/s] below which the friction direction is taken as unknown
-        and the compensation ramps to zero (0.552: the tuning protocol's).
+        and the compensation ramps to zero (1.42: the same adopted point's).
     load_dependent
         Identify the load-dependent Coulomb part ``mu`` and the scale ``g``; if False,
         ``g = 1`` and ``mu = 0`` (the plain exponential model).
@@ -202,7 +202,7 @@ class CurrentBased(Method):
     tunable = {"velocity_cutoff": (50.0, 800.0, "log"), "accel_cutoff": (5.0, 100.0, "log"),
                "sign_width": (0.1, 2.0, "log")}
 
-    def __init__(self, cutoff=130.0, velocity_cutoff=87.8, accel_cutoff=7.3, sign_width=0.552,
+    def __init__(self, cutoff=130.0, velocity_cutoff=60.2, accel_cutoff=22.5, sign_width=1.42,
                  load_dependent=True):
         self.cutoff = cutoff
         self.velocity_cutoff = velocity_cutoff

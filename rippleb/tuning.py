@@ -46,10 +46,9 @@ BUDGET = 16
 #: development check uses (those are 0-99) and no publication can (its devices are drawn from
 #: a sealed salt); 20, so that the signed-rank test can pass after Holm over 15 points.
 PAIRED_SEEDS = tuple(range(100, 120))
-#: The devices of the built-ins' record (``methods/tuning.json``), made by the former rule:
-#: the first five of :data:`PAIRED_SEEDS`. ``rippleb tune``'s default until the built-ins
-#: are re-tuned under :data:`RULE_ID` (docs/tuning.md, "Re-tuning under the paired rule").
-SEEDS = PAIRED_SEEDS[:5]
+#: The devices of the built-ins' record (``methods/tuning.json``) and ``rippleb tune``'s
+#: default: :data:`PAIRED_SEEDS` (the former rule's record used their first five).
+SEEDS = PAIRED_SEEDS
 CRITERION = ("mean rms_error_ref_nm (against torque_ref) of the method fitted on the calibration "
              "log of each tuning device and run on that same log")
 #: The rule, by name (a record keeps it in ``protocol.rule_id``) and in words.
@@ -65,10 +64,9 @@ EVERY_DEVICE_RULE = ("the point of lowest mean replaces the default only when it
                      "device (paired); otherwise the default stays")
 #: The rules ``rippleb tune --rule`` runs, by name, in words.
 RULES = {RULE_ID: RULE, EVERY_DEVICE: EVERY_DEVICE_RULE}
-#: The rule of the built-ins' record, ``rippleb tune``'s default: the record was made by the
-#: former rule on :data:`SEEDS`, and re-tuning every built-in under :data:`RULE_ID` on
-#: :data:`PAIRED_SEEDS` (which changes defaults, and so every published row) is not done yet.
-PROTOCOL_RULE = EVERY_DEVICE
+#: The rule of the built-ins' record, ``rippleb tune``'s default: the paired rule, under which
+#: every built-in was re-tuned on :data:`PAIRED_SEEDS` (2026-11-27, docs/tuning.md).
+PROTOCOL_RULE = RULE_ID
 #: The record of the built-ins' tuning, in the methods package.
 RECORD = "tuning.json"
 

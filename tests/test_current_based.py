@@ -54,8 +54,9 @@ def _stream(method, log, size=None):
 
 def test_identification_recovers_a_known_friction_model():
     # with the velocity and acceleration filters before the tuning protocol (200 and 25 Hz):
-    # its 87.8 and 7.3 Hz delay the speed enough to bias the viscous term by about +25 %,
-    # which the calibration score against torque_ref did not penalise (docs/tuning.md)
+    # its slower speed filters (87.8 and 7.3 Hz, then 60.2 and 22.5 Hz) delay the speed enough
+    # to bias the viscous term, which the calibration score against torque_ref does not
+    # penalise (docs/tuning.md, docs/methods/current-based.md)
     method = CurrentBased(velocity_cutoff=200.0, accel_cutoff=25.0, sign_width=0.5)
     method.fit(_calibration())
     f = method.friction_

@@ -2,6 +2,7 @@
 
 import inspect
 import json
+from pathlib import Path
 import subprocess
 import sys
 
@@ -13,7 +14,7 @@ from rippleb.engine.tuner import entry, plan
 from rippleb.errors import PluginError
 from rippleb.registry import Registry
 from rippleb.report.tuning_table import tuning_markdown
-from rippleb.tuning import (BUDGET, PAIRED_SEEDS, PROTOCOL_RULE, RULE_ID, SEEDS, adopted, candidates, check_tunable, pvalues,
+from rippleb.tuning import (BUDGET, EVERY_DEVICE, PAIRED_SEEDS, PROTOCOL_RULE, RULE_ID, SEEDS, adopted, candidates, check_tunable, pvalues,
                             read_record, replaces_default, rule_of, summary)
 
 RANGES = {"a": (1e-3, 10.0, "log"), "b": (-1.0, 1.0, "linear"), "n": (2, 9, "int")}
@@ -170,6 +171,23 @@ def test_every_builtin_runs_with_the_values_its_tuning_adopted():
             f"{name}: set its defaults to the adopted point {method['adopted']} of methods/tuning.json"
 
 
+STABILITY = Path(__file__).resolve().parent.parent / "docs" / "tuning-stability"
+TUNING_DOC = STABILITY.parent / "tuning.md"
+
+
+def test_the_stability_table_is_what_compare_prints():
+    """docs/tuning.md's stability table is what ``rippleb tune --compare`` prints for the two
+    records of docs/tuning-stability/, and the built-ins' record is the first of them
+    (docs/tuning.md, "Re-tuning after a change of the physics")."""
+    from rippleb.report.tuning_stability import read, stability_markdown
+
+    first, second = (read(STABILITY / name) for name in ("100-119.json", "5000-5019.json"))
+    assert first == RECORD, "methods/tuning.json is not docs/tuning-stability/100-119.json"
+    assert second["protocol"] == {**first["protocol"], "seeds": list(range(5000, 5020))}
+    assert stability_markdown(first, second) in TUNING_DOC.read_text(), \
+        "docs/tuning.md's stability table is stale: paste what 'rippleb tune --compare' prints"
+
+
 def test_a_run_records_the_tuning_and_its_report_prints_it():
     recorded = summary()
     assert recorded["protocol"] == RECORD["protocol"] and len(recorded["sha256"]) == 64
@@ -216,7 +234,8 @@ def test_tune_through_the_cli_writes_a_record_and_says_its_verdict(tmp_path):
     grown = json.loads(out.read_text())
     assert grown["methods"]["lowpass"] == lowpass and set(grown["methods"]) == {"lowpass", "raw", "current-based"}
     # ... and a record of another protocol is never mixed into this one
-    other_rule = _tune("--methods", "current-based", "--budget", 3, "--seeds", "100", "--jobs", 1, "--out", out)
+    other_rule = _tune("--methods", "current-based", "--budget", 3, "--seeds", "100", "--jobs", 1, "--out", out,
+                       "--rule", EVERY_DEVICE)
     assert other_rule.returncode == 2 and "another protocol" in other_rule.stderr
 
 

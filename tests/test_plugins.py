@@ -205,8 +205,10 @@ def test_a_plugin_tuned_by_rippleb_tune_runs_with_the_values_it_adopted(site, tm
     """Issue 39: 'rippleb tune --methods mine' printed "replaces the default" though nothing was
     replaced, and nothing said how to run the tuned values."""
     record = tmp_path / "tuned.json"
-    tune = rippleb(site, "tune", "--methods", "gain", "--budget", 4, "--seeds", "100", "--jobs", 1, "--out", record,
-                   "--no-progress", timeout=1800)
+    # One device and the former rule, which can adopt on one: the paired rule, the default
+    # since the re-tuning, needs several devices to pass its signed-rank test.
+    tune = rippleb(site, "tune", "--methods", "gain", "--budget", 4, "--seeds", "100", "--rule", "every-device",
+                   "--jobs", 1, "--out", record, "--no-progress", timeout=1800)
     assert tune.returncode == 0, tune.stderr
     adopted = json.loads(record.read_text())["methods"]["gain"]["adopted"]
     assert adopted["scale"] > 0.5 and "replaces the default" not in tune.stdout

@@ -69,12 +69,18 @@ def test_a_job_that_raises_is_a_status_through_the_server():
 # (rippleb/engine/process/hugepages.py): the bytes a job inherits, and the privacy of
 # what it writes, must be those of plain 4 KiB pages. 16 MiB spans whole 2 MiB pages.
 INHERITED = np.random.default_rng(7).integers(0, 2**63, size=2 << 20, dtype=np.uint64)
-INHERITED_DIGEST = hashlib.sha256(INHERITED.tobytes()).hexdigest().encode()
+
+
+def _digest(array) -> bytes:
+    return hashlib.sha256(array.tobytes()).hexdigest().encode()
+
+
+INHERITED_DIGEST = _digest(INHERITED)
 
 
 def digest_then_scribble(context):
     """A job: the digest of what it inherited, then it overwrites every byte of it."""
-    seen = hashlib.sha256(INHERITED.tobytes()).hexdigest().encode()
+    seen = _digest(INHERITED)
     INHERITED[:] = 0
     return seen
 
@@ -89,15 +95,15 @@ def test_jobs_inherit_the_servers_bytes_and_what_one_writes_stays_its_own():
 
 def test_collapsing_changes_no_byte_and_a_childs_write_stays_the_childs():
     data = np.random.default_rng(8).integers(0, 2**63, size=2 << 20, dtype=np.uint64)
-    before = hashlib.sha256(data.tobytes()).hexdigest()
+    before = _digest(data)
     assert hugepages.collapse_private_memory() >= 0   # 0 where the kernel offers no 2 MiB pages
-    assert hashlib.sha256(data.tobytes()).hexdigest() == before
+    assert _digest(data) == before
     pid = os.fork()
     if pid == 0:
         data[:] = 0
         os._exit(0 if not data.any() else 1)
     assert os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) == 0
-    assert hashlib.sha256(data.tobytes()).hexdigest() == before
+    assert _digest(data) == before
 
 
 def test_only_whole_2mib_pages_of_anonymous_private_memory_are_collapsed():

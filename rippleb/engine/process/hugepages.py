@@ -5,7 +5,7 @@ and two exits. The kernel copies, then tears down, one page-table entry per 4 Ki
 server has touched: about 120 MB of numpy, scipy, numba and the built-in methods, some
 30 000 entries a fork. On the 50-device publication that was most of the kernel's 43 % of
 the run's CPU (``perf``: ``copy_page_range`` in ``dup_mmap``, ``unmap_page_range`` in
-``exit_mmap``; docs/scale.md). A range the kernel maps by one 2 MiB page is one entry
+``exit_mmap``; docs/robustness.md, "The fork itself"). A range the kernel maps by one 2 MiB page is one entry
 to copy and to tear down instead of 512.
 
 :func:`collapse_private_memory` asks the kernel, once, after the server has loaded what

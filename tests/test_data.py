@@ -1,5 +1,9 @@
+import dataclasses
+
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from rippleb import InputError, JointSpec, SensorLog, make_log, read_log, write_log
 
@@ -28,6 +32,36 @@ def test_blocks_cover_the_log_in_order():
     blocks = list(log.blocks())
     assert [len(b) for b in blocks] == [20] * 5 + [5]
     np.testing.assert_array_equal(np.concatenate([b.t for b in blocks]), log.t)
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(n=st.integers(0, 130), size=st.integers(1, 45), n_channels=st.sampled_from([0, 1, 3]),
+       stride=st.sampled_from([1, 2]), with_index=st.booleans())
+def test_blocks_are_the_slices_of_the_log_as_views(n, size, n_channels, stride, with_index):
+    """Each block holds exactly ``column[start:start + size]`` of every column, as a view of
+    the log's own array (strided columns and 2-D channels too), and stays frozen."""
+    rng = np.random.default_rng(n * 1000 + size)
+    wide = rng.normal(size=(n * stride, 6 + max(n_channels, 1)))[::stride]   # strided columns
+    index = (rng.random(n) < 0.1).astype(np.int8) if with_index else None
+    channels = wide[:, 6:6 + n_channels] if n_channels else None
+    log = SensorLog(spec=JointSpec(), t=wide[:, 0], strain=wide[:, 1],
+                    encoder=np.arange(n, dtype=np.int64), current=wide[:, 2], index=index,
+                    channels=channels)
+    blocks = list(log.blocks(size))
+    assert len(blocks) == -(-n // size)
+    for k, block in enumerate(blocks):
+        part = slice(k * size, (k + 1) * size)
+        for name in ("t", "strain", "encoder", "current", "index", "channels"):
+            column, got = getattr(log, name), getattr(block, name)
+            if column is None:
+                assert got is None
+                continue
+            np.testing.assert_array_equal(got, column[part])
+            assert got.dtype == column.dtype
+            assert got.flags.c_contiguous == column[part].flags.c_contiguous   # what a compiled signature reads
+            assert np.shares_memory(got, column)
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            block.strain = None
 
 
 def test_for_method_hides_truth():

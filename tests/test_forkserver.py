@@ -55,6 +55,22 @@ def test_the_server_exits_when_the_runner_closes_it():
         os.waitpid(pid, os.WNOHANG)
 
 
+def my_name(context):
+    """A job: the name its process goes by."""
+    with open("/proc/self/comm", "rb") as fh:
+        return fh.read().strip()
+
+
+def test_the_server_and_its_workers_go_by_their_names():
+    """``ps`` and ``perf`` tell the kinds of process apart (isolation.name_process)."""
+    with ForkServer.start(None) as server:
+        fin = _run_one(Pool(1, server=server), my_name)   # the server has named itself by now
+        with open(f"/proc/{server.pid}/comm", "rb") as fh:
+            server_name = fh.read().strip()
+    assert server_name == b"rippleb-server"
+    assert fin.kind == "done" and fin.value == b"rippleb-worker", fin
+
+
 def raises(context):
     raise ValueError("bad input in a job")
 

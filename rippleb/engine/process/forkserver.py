@@ -141,6 +141,7 @@ def _serve(sock: socket.socket, context, preload) -> None:
     from rippleb.engine.process.keeper import Bound, keeper
 
     isolation.die_with_parent()
+    isolation.name_process("rippleb-server")
     # Ctrl-C reaches the whole foreground process group: the runner handles it (it ends
     # the jobs and closes this server); SIGTERM from the runner's handler kills us plainly.
     signal.signal(signal.SIGINT, signal.SIG_IGN)

@@ -36,6 +36,7 @@ CLONE_NEWPID = 0x20000000
 CLONE_NEWNET = 0x40000000
 PR_SET_CHILD_SUBREAPER = 36
 PR_SET_PDEATHSIG = 1
+PR_SET_NAME = 15
 PR_GET_DUMPABLE, PR_SET_DUMPABLE = 3, 4
 # mount(2) flags
 MS_RDONLY, MS_NOSUID, MS_NODEV, MS_NOEXEC = 1, 2, 4, 8
@@ -70,6 +71,15 @@ def become_subreaper() -> bool:
         return libc().prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) == 0
     except (OSError, AttributeError):
         return False
+
+
+def name_process(name: str) -> None:
+    """Name this process as ``ps``, ``top`` and ``perf`` show it (``/proc/self/comm``, at most
+    15 bytes): the fork server, a keeper and a worker are otherwise all ``python``, and
+    where a run's time goes is read per kind of process (docs/robustness.md, "The fork
+    itself"). Nothing else reads it."""
+    with contextlib.suppress(OSError, AttributeError, TypeError):
+        libc().prctl(PR_SET_NAME, ctypes.c_char_p(name.encode()[:15]), 0, 0, 0)
 
 
 def die_with_parent() -> None:

@@ -55,6 +55,7 @@ def keeper(fn, result_w: int, ctrl_w: int, memory_mb, output, confine=None) -> N
         # from the runner until here is its handler (the runner decides what a signal ends).
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        isolation.name_process("rippleb-keeper")
         _keep_inherited_pages_shared()
         os.setsid()
         isolation.close_fds_except(result_w, ctrl_w)
@@ -183,6 +184,7 @@ def _wait_worker(worker: int, ctrl_w: int, log: JobLog, clock: Clock) -> int:
 
 def _worker(fn, result_w: int, memory_mb, confine, scratch, granted, clock_w: int) -> None:
     try:
+        isolation.name_process("rippleb-worker")
         _keep_inherited_pages_shared()
         isolation.die_with_parent()
         isolation.close_fds_except(result_w, clock_w)

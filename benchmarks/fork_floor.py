@@ -16,7 +16,8 @@ prints the CPU time per job (user and system, this process and its children, fro
   through :func:`rippleb.harness.run` (the pages a row's method writes after the fork);
 * ``stream raw, in process``: that streaming alone, in this process, for comparison;
 
-and the first two shapes again in a bare interpreter (``python -c``, nothing imported).
+and the first two shapes again in a bare interpreter (this script run again with ``--bare``:
+only the standard library loaded).
 CPU seconds, so a busy machine inflates every line alike; what the lines say is their
 differences.
 """
@@ -29,29 +30,6 @@ import os
 import resource
 import subprocess
 import sys
-
-import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
-
-_BARE = """
-import os, resource, sys
-n = int(sys.argv[1])
-def cpu():
-    return sum(r.ru_utime + r.ru_stime for r in (resource.getrusage(resource.RUSAGE_SELF),
-                                                  resource.getrusage(resource.RUSAGE_CHILDREN)))
-for nested in (False, True):
-    start = cpu()
-    for _ in range(n):
-        pid = os.fork()
-        if pid == 0:
-            if nested:
-                inner = os.fork()
-                if inner == 0:
-                    os._exit(0)
-                os.waitpid(inner, 0)
-            os._exit(0)
-        os.waitpid(pid, 0)
-    print((cpu() - start) / n * 1e3)
-"""
 
 
 def _cpu_seconds() -> float:
@@ -82,8 +60,14 @@ def per_job_ms(jobs: int, nested: bool, work=None) -> float:
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--jobs", type=int, default=60, help="forks timed per line (default 60)")
+    parser.add_argument("--bare", action="store_true",
+                        help="time the two fork shapes in this interpreter with only the standard library loaded")
     args = parser.parse_args(argv)
+    if args.bare:   # how the script times a bare interpreter: itself, run again with nothing loaded
+        print(per_job_ms(args.jobs, False), per_job_ms(args.jobs, True))
+        return 0
 
+    import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
     from rippleb import harness
     from rippleb.engine.process import hugepages
     from rippleb.engine.runner import _warm
@@ -113,8 +97,8 @@ def main(argv: list[str]) -> int:
              ("fork, fork, exit, exit", per_job_ms(args.jobs, True)),
              ("fork, fork, exit, exit + stream raw", per_job_ms(max(5, args.jobs // 4), True, stream)),
              ("stream raw, in process", in_process)]
-    bare = subprocess.run([sys.executable, "-c", _BARE, str(args.jobs)], capture_output=True, text=True,
-                          check=True).stdout.split()
+    bare = subprocess.run([sys.executable, __file__, "--bare", "--jobs", str(args.jobs)], capture_output=True,
+                          text=True, check=True).stdout.split()
     lines += [("bare interpreter: fork, exit", float(bare[0])),
               ("bare interpreter: fork, fork, exit, exit", float(bare[1]))]
     with open("/proc/self/status") as fh:

@@ -59,8 +59,8 @@ _EXPORTS = {
     "SensorBlock": "rippleb.data",
     "SensorLog": "rippleb.data",
     "make_log": "rippleb.data",
-    "read_log": "rippleb.data",
-    "write_log": "rippleb.data",
+    "read_log": "rippleb.log_files",
+    "write_log": "rippleb.log_files",
     "InputError": "rippleb.errors",
     "PluginError": "rippleb.errors",
     "RipplebError": "rippleb.errors",
@@ -79,7 +79,8 @@ _EXPORTS = {
 if TYPE_CHECKING:  # what static tools see: the same names, imported eagerly
     from rippleb.simulator.conditions import CONDITIONS, DEFAULT_CONDITION
     from rippleb.engine.dask.executor import DaskExecutor
-    from rippleb.data import JointSpec, SensorBlock, SensorLog, make_log, read_log, write_log
+    from rippleb.data import JointSpec, SensorBlock, SensorLog, make_log
+    from rippleb.log_files import read_log, write_log
     from rippleb.errors import InputError, PluginError, RipplebError
     from rippleb.method import Method
     from rippleb.engine.runner import run, run_log

@@ -238,7 +238,7 @@ def test_lab_columns_and_their_joint_file_read_back_as_the_log(tmp_path):
     the log it came from, its reference named and declared for what it is; a joint.toml that
     says something else is kept and refused."""
     from rippleb import make_log
-    from rippleb.data import write_columns
+    from rippleb.log_files import write_columns
     from rippleb.lab_format import joint_toml, lab_columns, write_joint_toml
 
     frame = _frame(4000)

@@ -166,7 +166,7 @@ def test_the_walls_hold_for_an_unprivileged_user(site):
 @pytest.mark.slow
 def test_a_method_cannot_read_the_recording_it_is_scored_on(site, tmp_path):
     """The issue's second row: ``run --log`` (its reference in the file beside the method)."""
-    from rippleb.data import write_log
+    from rippleb.log_files import write_log
     from rippleb.simulator import simulate
 
     _skip_without_walls()

@@ -88,7 +88,7 @@ def case_scheduler(where: Path, site: Path) -> tuple[str, int, str]:
 
 
 def case_log(where: Path, site: Path) -> tuple[str, int, str]:
-    from rippleb.data import write_log
+    from rippleb.log_files import write_log
     from rippleb.simulator import simulate
 
     write_log(simulate("static-contact", 0).log, where / "rec.csv")

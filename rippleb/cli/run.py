@@ -325,7 +325,7 @@ def _refuse_without_log(args) -> None:
 
 def read_logs(args):
     """The scored and the calibration log of ``--log``, read with ``--joint`` and ``--resample``."""
-    from rippleb.data import read_log
+    from rippleb.log_files import read_log
     from rippleb.joint_file import load_joint
 
     joint = load_joint(args.joint) if args.joint is not None else None

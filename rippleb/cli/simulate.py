@@ -42,7 +42,7 @@ def add_simulate(sub) -> None:
 def cmd_simulate(args) -> int:
     """``rippleb simulate``."""
     from rippleb.simulator.conditions import check_condition
-    from rippleb.data import write_log
+    from rippleb.log_files import write_log
     from rippleb.engine.runner import check_scenario
     from rippleb.simulator import simulate
     from rippleb.simulator.validity import check_simulation
@@ -85,7 +85,7 @@ def _scenario(name: str, params: list[str]):
 
 def _write_lab(sim, out: Path, kind: str) -> Path:
     """The log in the lab's columns with the reference of ``kind``, and ``joint.toml`` beside it."""
-    from rippleb.data import write_columns
+    from rippleb.log_files import write_columns
     from rippleb.lab_format import joint_toml, lab_columns, write_joint_toml
     from rippleb.simulator.transducer import lab_log
 

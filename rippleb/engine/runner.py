@@ -206,10 +206,10 @@ def run_log(log, calibration=None, methods=None, *, jobs: int = 1, out=None,
     methods, jobs, out, timeout, memory_mb, progress, on_start
         As in :func:`run`.
     joint, resample
-        As in :func:`rippleb.data.read_log`, for the logs given as paths; the calibration
+        As in :func:`rippleb.log_files.read_log`, for the logs given as paths; the calibration
         log is read with the scored log's joint values.
     """
-    from rippleb.data import read_log
+    from rippleb.log_files import read_log
 
     check_options(jobs=jobs, timeout=timeout, memory_mb=memory_mb)
     registry = Registry.discover()

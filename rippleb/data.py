@@ -40,9 +40,6 @@ SMALLEST_NORMAL = float(np.finfo(float).tiny)
 #: Simulated loads stay below it; a recorded log's estimate beyond it is not scored
 #: (:mod:`rippleb.scoring.scorable`).
 MAX_TORQUE_FACTOR = 10.0
-#: Most samples a recorded log may hold: 20 million, 1000 s at 20 kHz, twice the longest
-#: simulated scenario (:data:`rippleb.simulator.scenario.MAX_SAMPLES`); more is read no further.
-MAX_LOG_SAMPLES = 20_000_000
 
 
 @dataclass(frozen=True)

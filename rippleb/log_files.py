@@ -21,12 +21,16 @@ from pathlib import Path
 
 import numpy as np
 
-from rippleb.data import MAX_LOG_SAMPLES, JointSpec, SensorLog, holds_booleans, make_log
+from rippleb.data import JointSpec, SensorLog, holds_booleans, make_log
 from rippleb.errors import InputError
 from rippleb.files import atomic_path
 from rippleb.log_columns import LOG_COLUMNS, MAX_CHANNELS, channel_names
 from rippleb.reading import LOG_BYTES, check_file, duplicated_columns, read_table
 from rippleb.timebase import check_steps, uniform_rate
+
+#: Most samples a recorded log may hold: 20 million, 1000 s at 20 kHz, twice the longest
+#: simulated scenario (:data:`rippleb.simulator.scenario.MAX_SAMPLES`); more is read no further.
+MAX_LOG_SAMPLES = 20_000_000
 
 
 def read_log(path: str | Path, spec: JointSpec | None = None, *, joint=None,

@@ -44,7 +44,7 @@ RUN_FILE_BYTES = 16 * MIB
 #: A scenario or a joint file: a scenario of 1000 segments (its most) is about 100 kB.
 TOML_BYTES = 1 * MIB
 #: A recorded log, CSV or Parquet: 4 GiB is twenty million samples of seven CSV columns,
-#: twice the longest simulated scenario; :data:`rippleb.data.MAX_LOG_SAMPLES` bounds the rows.
+#: twice the longest simulated scenario; :data:`rippleb.log_files.MAX_LOG_SAMPLES` bounds the rows.
 LOG_BYTES = 4 * GIB
 #: A salt file (64 hex digits) or rippleb's key (32 bytes).
 SECRET_BYTES = 4 * KIB

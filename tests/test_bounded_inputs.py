@@ -195,10 +195,10 @@ def test_a_log_column_mapped_twice_is_refused(tmp_path, monkeypatch, capsys):
 
 
 def test_a_log_with_more_rows_than_the_cap_is_refused_reading_no_further(tmp_path, monkeypatch, capsys):
-    from rippleb import data
+    from rippleb import log_files
 
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(data, "MAX_LOG_SAMPLES", 100)
+    monkeypatch.setattr(log_files, "MAX_LOG_SAMPLES", 100)
     frame = log_frame(n=8000)
     frame.to_csv("rec.csv", index=False)
     frame.to_parquet("rec.parquet")

@@ -1,6 +1,5 @@
 """The fork server: jobs run from it, not from the runner, and it ends with the run."""
 
-import gc
 import hashlib
 import os
 
@@ -129,22 +128,3 @@ def test_only_whole_2mib_pages_of_anonymous_private_memory_are_collapsed():
     for start, end in ranges:
         assert start % hugepages.HUGE_PAGE == 0 and end % hugepages.HUGE_PAGE == 0 and end > start
 
-
-@pytest.mark.slow
-def test_the_fork_floor_script_prints_a_cost_for_every_shape(capsys):
-    """benchmarks/fork_floor.py (docs/report.md, "Where the floor is") runs and prints a
-    positive CPU time for each of its six shapes (no time is asserted: they are the machine's)."""
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "fork_floor.py"
-    spec = importlib.util.spec_from_file_location("fork_floor", path)
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
-    try:
-        assert script.main(["--jobs", "2"]) == 0
-    finally:
-        gc.unfreeze()   # the script freezes this process's objects as the server does
-    lines = [line for line in capsys.readouterr().out.splitlines() if line.endswith("CPU ms a job")]
-    assert len(lines) == 6
-    assert all(float(line.split()[-5]) > 0 for line in lines)

@@ -7,6 +7,7 @@ from hypothesis.extra.numpy import arrays
 from rippleb.scoring.metrics import (Truth, _lag_correlation, bandwidth_hz, delay_ms, max_error,
                                      moving_from_encoder, restart_max_error, rms_error, score,
                                      step_latency_ms, tick_stats)
+from support import load_script
 
 FS = 20_000.0
 
@@ -251,25 +252,13 @@ def test_lag_correlation_is_pearson_on_each_overlap(n, seed, reach):
         assert r[lag] == pytest.approx(expected, abs=1e-9)
 
 
-def _benchmark(name):
-    """A script of benchmarks/ as a module (its numbers are in docs/)."""
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_the_gear_floor_script_splits_raws_former_share_over_the_strains_terms():
     """benchmarks/gear_floor.py (docs/metrics.md's table): the terms sum to raw's former
     share by construction, so what is checked is that they are the physics' terms: the
     hysteresis takes a positive share (it lags a rising torque and flattens the gear's
     oscillations: +0.25 on this device), the ripple at orders 1-2 the device's own (-0.62
     here), gain, offset, drift and noise little (|rest| 0.013), and raw removes nothing."""
-    floor = _benchmark("gear_floor")
+    floor = load_script("benchmarks/gear_floor.py")
     table = floor.measure([2000], ["paper-quintic"])
     parts = {k: v[0] for k, v in table["paper-quintic"].items()}
     assert parts["hysteresis"] > 0.05

@@ -303,3 +303,15 @@ class Page(html.parser.HTMLParser):
 
     def tags(self) -> list[str]:
         return [tag for tag, _ in self.elements]
+
+
+def load_script(relative: str):
+    """A script of the repository (``benchmarks/gear_floor.py``) as a module, to call what
+    it prints from: the scripts behind docs' figures are not a package."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[2] / relative
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module

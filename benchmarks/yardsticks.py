@@ -2,24 +2,26 @@
 
     python benchmarks/yardsticks.py [--passes N]
 
-One ``scipy.signal.lfilter`` call with state (2nd-order Butterworth) on a 20-sample tick,
-and ``raw``'s ``step`` on the same tick, interleaved over the 4000 ticks of paper-quintic
-seed 0, ``--passes`` times; prints the median of each. Timed next to a whole command (a
-default run), they say how fast the machine ran at the time, so that times taken in
-different sittings can be compared in these units (docs/report.md, "The machine's pace
-against the yardsticks"); ``benchmarks/bench_methods.py`` times every method against them.
+The yardsticks ``benchmarks/bench_methods.py`` times every method against, as it defines
+and times them (``lfilter_step``, ``interleaved_times``): one ``scipy.signal.lfilter`` call
+with state (2nd-order Butterworth) on a 20-sample tick and ``raw``'s ``step`` on the same
+tick, interleaved over the 4000 ticks of paper-quintic seed 0, ``--passes`` times; prints
+the median of each. Timed next to a whole command (a default run), they say how fast the
+machine ran at the time (docs/report.md, "The machine's pace against the yardsticks").
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-import time
+from pathlib import Path
 
 import rippleb  # noqa: F401 - before numpy: the portable numeric paths (rippleb/numerics.py)
 
 import numpy as np
-from scipy import signal
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # the yardsticks' one definition
+from bench_methods import interleaved_times  # noqa: E402
 
 
 def yardsticks(passes: int) -> tuple[float, float, int]:
@@ -32,21 +34,7 @@ def yardsticks(passes: int) -> tuple[float, float, int]:
     calibration = simulate(load_scenario("calibration"), 0).log
     log = simulate(load_scenario("paper-quintic"), 0).log.for_method(keep_ref=False)
     raw, _, _ = harness.fitted(Registry.discover().get("raw").load(), None, calibration)
-    raw.reset(log.spec)
-    b, a = signal.butter(2, 0.1)
-    state = signal.lfilter_zi(b, a)
-    blocks = harness.prepare_blocks(log)
-    clock = time.perf_counter_ns
-    lfilter_ns, raw_ns = [], []
-    for _ in range(passes):
-        for block in blocks:
-            t0 = clock()
-            _, state = signal.lfilter(b, a, block.strain, zi=state)
-            t1 = clock()
-            raw.step(block)
-            t2 = clock()
-            lfilter_ns.append(t1 - t0)
-            raw_ns.append(t2 - t1)
+    _, lfilter_ns, raw_ns = interleaved_times(raw, raw, log, repeats=passes)
     return float(np.median(lfilter_ns)) / 1e3, float(np.median(raw_ns)) / 1e3, len(lfilter_ns)
 
 
